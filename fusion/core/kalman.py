@@ -1,0 +1,182 @@
+r"""Kalman and extended Kalman filters.
+
+Predict (motion Jacobian F evaluated at the prior state x):
+    x- = f(x, dt) (+ B u)            P- = F P F' + Q
+Update with z ~ N(h(x), R), H = dh/dx at x-:
+    y = z - h(x-) (angles wrapped)   S = H P- H' + R = L L'   (Cholesky; never inverted)
+    K = P- H' S^-1  (two triangular solves with L)
+    x+ = x- + K y                    P+ = (I - K H) P- (I - K H)' + K R K'   (Joseph form)
+    NIS = y' S^-1 y = |L^-1 y|^2     log-likelihood = -(NIS + log det S + m log 2 pi) / 2
+
+The kernels `predict_arrays` and `update_arrays` broadcast over leading dimensions, so a stack
+of N tracks is one call; `KalmanFilter` and `ExtendedKalmanFilter` wrap them for one state.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.typing import ArrayLike
+from scipy.linalg.lapack import dpotrf, dtrtrs
+
+from fusion.core.checks import Array, as_covariance, as_vector
+from fusion.core.gaussian import GaussianState, Update
+from fusion.core.measurement import MeasurementModel
+from fusion.core.motion import LinearMotionModel, MotionModel
+from fusion.core.timebase import dt_seconds
+from fusion.errors import ConfigError, NumericalError, ShapeError
+
+LOG_2PI = math.log(2.0 * math.pi)
+
+
+def _swap(a: Array) -> Array:
+    return np.swapaxes(a, -1, -2)
+
+
+def predict_arrays(x: Array, P: Array, F: Array, Q: Array, fx: Array | None = None) -> tuple[Array, Array]:
+    """x- = F x (or fx, the nonlinear f(x) when given); P- = F P F' + Q, symmetrised."""
+    xp = (F @ x[..., None])[..., 0] if fx is None else fx
+    Pp = F @ P @ _swap(F) + Q
+    return xp, 0.5 * (Pp + _swap(Pp))
+
+
+def update_arrays(
+    x: Array, P: Array, y: Array, H: Array, R: Array
+) -> tuple[Array, Array, Array, Array, Array]:
+    """Joseph-form update given the innovation y; returns x+, P+, S, NIS, log-likelihood.
+
+    Raises NumericalError where S is not positive definite.
+    """
+    PHt = P @ _swap(H)
+    S = H @ PHt + R
+    S = 0.5 * (S + _swap(S))
+    try:
+        L = np.linalg.cholesky(S)
+    except np.linalg.LinAlgError:
+        raise NumericalError(
+            "innovation covariance S = H P H' + R is not positive definite; "
+            "check R and the track covariance P"
+        ) from None
+    # One solve with L for [H P | y], then one with L' for the gain: K' = L'^-1 L^-1 H P.
+    m = y.shape[-1]
+    rhs = np.concatenate([_swap(PHt), y[..., None]], axis=-1)
+    W = np.linalg.solve(L, rhs)
+    Kt = np.linalg.solve(_swap(L), W[..., :-1])
+    w = W[..., -1]
+    nis = np.einsum("...i,...i->...", w, w)
+    logdet = 2.0 * np.log(np.diagonal(L, axis1=-2, axis2=-1)).sum(axis=-1)
+    loglik = -0.5 * (nis + logdet + m * LOG_2PI)
+    K = _swap(Kt)
+    xn = x + (K @ y[..., None])[..., 0]
+    IKH = np.eye(x.shape[-1]) - K @ H
+    Pn = IKH @ P @ _swap(IKH) + K @ R @ Kt
+    return xn, 0.5 * (Pn + _swap(Pn)), S, nis, loglik
+
+
+def update_single(x: Array, P: Array, y: Array, H: Array, R: Array) -> tuple[Array, Array, Array, float, float]:
+    """`update_arrays` for one state, through LAPACK directly (potrf, trtrs): the same math,
+    without the per-call overhead of numpy's stacked linear algebra."""
+    PHt = P @ H.T
+    S = H @ PHt + R
+    S += S.T
+    S *= 0.5
+    L, info = dpotrf(S, lower=1, clean=1)
+    if info != 0:
+        raise NumericalError(
+            "innovation covariance S = H P H' + R is not positive definite; "
+            "check R and the track covariance P"
+        )
+    n = x.shape[0]
+    rhs = np.empty((y.shape[0], n + 1))
+    rhs[:, :n] = PHt.T
+    rhs[:, n] = y
+    W, _ = dtrtrs(L, rhs, lower=1)
+    Kt, _ = dtrtrs(L, W[:, :n], lower=1, trans=1)
+    w = W[:, n]
+    nis = float(w @ w)
+    logdet = 2.0 * sum(math.log(L[i, i]) for i in range(y.shape[0]))
+    K = Kt.T
+    xn = x + K @ y
+    IKH = -(K @ H)
+    IKH[np.diag_indices(n)] += 1.0
+    Pn = IKH @ P @ IKH.T + K @ R @ Kt
+    Pn += Pn.T
+    Pn *= 0.5
+    return xn, Pn, S, nis, -0.5 * (nis + logdet + y.shape[0] * LOG_2PI)
+
+
+class ExtendedKalmanFilter:
+    """EKF over any motion model and any measurement model (exact KF when both are linear).
+
+    Stateless: predict and update take a GaussianState and return new objects. With
+    check=True (the default) inputs are validated: shapes, finiteness, R positive definite.
+    """
+
+    def __init__(self, motion: MotionModel, *, check: bool = True) -> None:
+        self.motion = motion
+        self.check = check
+
+    @property
+    def ndim_state(self) -> int:
+        return self.motion.ndim_state
+
+    def initial(self, x: ArrayLike, P: ArrayLike, *, t_ns: int) -> GaussianState:
+        """A validated initial state for this filter."""
+        st = GaussianState.create(x, P, t_ns=t_ns)
+        if st.ndim != self.ndim_state:
+            raise ShapeError(f"initial x has {st.ndim} components, the model has {self.ndim_state}")
+        return st
+
+    def predict(self, state: GaussianState, t_ns: int, *, u: ArrayLike | None = None) -> GaussianState:
+        """Predict to t_ns (>= state.t_ns); u is the control input if the model takes one."""
+        dt = dt_seconds(state.t_ns, t_ns)
+        m = self.motion
+        F = m.jacobian(state.x, dt)  # at the prior state
+        x = F @ state.x if m.is_linear else m.f(state.x, dt)
+        P = F @ state.P @ F.T
+        P += m.Q(state.x, dt)
+        P += P.T
+        P *= 0.5
+        if u is not None:
+            B = m.control(dt)
+            if B is None:
+                raise ConfigError(f"{type(m).__name__} takes no control input")
+            x = x + B @ as_vector("u", u, B.shape[1])
+        if self.check and not np.isfinite(x).all():
+            raise NumericalError(f"prediction produced a non-finite state: {x}")
+        return GaussianState(x, P, int(t_ns))
+
+    def update(
+        self, state: GaussianState, z: ArrayLike, model: MeasurementModel, *, R: ArrayLike | None = None
+    ) -> Update:
+        """Fold z (taken at state.t_ns) in; R defaults to the model's."""
+        if self.check:
+            zv = as_vector("z", z, model.ndim_meas)
+            Rm = model.R if R is None else as_covariance("R", R, model.ndim_meas)
+        else:
+            zv = np.asarray(z, dtype=np.float64)
+            Rm = model.R if R is None else np.asarray(R, dtype=np.float64)
+        x = state.x
+        y = model.residual(zv, model.h(x))
+        xn, Pn, S, nis, ll = update_single(x, state.P, y, model.jacobian(x), Rm)
+        return Update(GaussianState(xn, Pn, state.t_ns), y, S, nis, ll)
+
+
+class KalmanFilter(ExtendedKalmanFilter):
+    """The linear Kalman filter: a linear motion model, linear measurement models only."""
+
+    def __init__(self, motion: LinearMotionModel, *, check: bool = True) -> None:
+        if not motion.is_linear:
+            raise ConfigError(f"KalmanFilter needs a linear motion model, got {type(motion).__name__}")
+        super().__init__(motion, check=check)
+
+    def update(
+        self, state: GaussianState, z: ArrayLike, model: MeasurementModel, *, R: ArrayLike | None = None
+    ) -> Update:
+        if not model.is_linear:
+            raise ConfigError(
+                f"KalmanFilter needs a linear measurement model, got {type(model).__name__}; "
+                "use ExtendedKalmanFilter or UnscentedKalmanFilter"
+            )
+        return super().update(state, z, model, R=R)
