@@ -253,7 +253,8 @@ def _helix(version: str, rng: np.random.Generator) -> Reference:
         truth = np.hstack([pos[1:], np.tile([0.1, 0.5], (K, 1))])
         meas = CartesianPosition(ndim_state=5, indices=(0, 1, 2), R=[0.5, 0.5, 0.5])
         z = pos[1:] + rng.standard_normal((K, 3))
-        x0, P0, layout, name = np.array([0.0, 20.0, 0.0, 0.5, 0.1]), np.eye(5), ("x", "y", "z", "w", "a"), "helix3d_ekf_doc"
+        x0, P0, name = np.array([0.0, 20.0, 0.0, 0.5, 0.1]), np.eye(5), "helix3d_ekf_doc"
+        layout = ("x", "y", "z", "w", "a")
     return Reference(name, dt, _times(dt, K), truth0, truth, z, motion, meas, x0, P0, layout)
 
 

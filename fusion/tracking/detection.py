@@ -1,0 +1,61 @@
+"""What the tracker takes in (a Detection) and the reasons it refuses one."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from enum import StrEnum
+
+import numpy as np
+
+from fusion.core.checks import Array
+
+
+class Reason(StrEnum):
+    """Why a measurement was refused. Every refused measurement carries exactly one."""
+
+    MALFORMED = "malformed"  # bytes that do not decode (used at the edge)
+    INVALID = "invalid"  # wrong dimension, NaN/inf, bad sequence number or time
+    BAD_COVARIANCE = "bad_covariance"  # a noise covariance that is not symmetric positive definite
+    UNKNOWN_SENSOR = "unknown_sensor"
+    DUPLICATE = "duplicate"  # same (sensor_id, seq) seen before
+    TOO_LATE = "too_late"  # older than the out-of-order window
+    FUTURE = "future"  # further ahead of the newest time than the tolerance
+
+
+@dataclass(frozen=True, slots=True)
+class Detection:
+    """One measurement: z in the sensor's measurement space at sensor time t_ns.
+
+    Cartesian sensors: z = position (d,). Radar (2-D): [range_m, bearing_rad] or
+    [range_m, bearing_rad, range_rate_mps]; radar (3-D): [range_m, azimuth_rad, elevation_rad]
+    with an optional range rate last. R is the noise covariance; None takes the sensor's default.
+    """
+
+    sensor_id: str
+    t_ns: int
+    seq: int
+    z: Array
+    R: Array | None = None
+
+    @property
+    def key(self) -> tuple[int, str, int]:
+        """The total processing order: (t_ns, sensor_id, seq)."""
+        return (self.t_ns, self.sensor_id, self.seq)
+
+    @classmethod
+    def of(cls, sensor_id: str, t_ns: int, seq: int, z: object, R: object | None = None) -> Detection:
+        return cls(
+            sensor_id, int(t_ns), int(seq), np.asarray(z, dtype=np.float64),
+            None if R is None else np.asarray(R, dtype=np.float64),
+        )
+
+
+@dataclass(frozen=True, slots=True)
+class Refusal:
+    """A refused measurement and why."""
+
+    sensor_id: str
+    t_ns: int
+    seq: int
+    reason: Reason
+    detail: str
