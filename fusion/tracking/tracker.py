@@ -61,6 +61,17 @@ class Estimate:
     y: np.ndarray | None
     S: np.ndarray | None
     mode_probabilities: np.ndarray | None = None
+    meas_pos: np.ndarray | None = None  # world position of the measurement used (the association)
+
+
+@dataclass(frozen=True, slots=True)
+class MeasuredPoint:
+    """A newly accepted measurement, in world Cartesian coordinates (for recordings)."""
+
+    sensor_id: str
+    t_ns: int
+    seq: int
+    position: np.ndarray
 
 
 @dataclass(frozen=True, slots=True)
@@ -106,6 +117,7 @@ class StepResult:
     applied: int
     replays: tuple[Replay, ...]
     associations: tuple[Association, ...]
+    measurements: tuple[MeasuredPoint, ...] = ()
 
 
 @dataclass
@@ -115,6 +127,7 @@ class _Entry:
     before: TrackSet
     scan_idx: int
     emitted: dict[int, tuple[int, bytes, bool]] = field(default_factory=dict)  # id -> (revision, signature, alive)
+    events: frozenset[tuple[str, int]] = frozenset()  # (kind, track id) of the events this scan produced
 
 
 @dataclass(frozen=True, slots=True)
@@ -278,10 +291,13 @@ class Tracker:
             out = self._scan(ts, scan_idx, key, entry.dets)
             replayed = prev is not None
             estimates.extend(self._revise(entry, prev, out.estimates))
+            entry.events = frozenset((ev.kind, ev.track_id) for ev in out.events)
             for ev in out.events:
-                events.append(TrackEvent(ev.kind, ev.track_id, ev.t_ns, ev.detail, replayed) if replayed else ev)
                 if ev.kind == "deleted":
                     deleted_ids.add(ev.track_id)
+                if prev is not None and (ev.kind, ev.track_id) in prev.events:
+                    continue  # reported when the scan first ran
+                events.append(TrackEvent(ev.kind, ev.track_id, ev.t_ns, ev.detail, replayed) if replayed else ev)
             assoc.extend(out.associations)
             self._hist.append(entry)
             self._keys.append(key)
@@ -294,7 +310,12 @@ class Tracker:
             for tid in sorted(before_ids - after_ids - deleted_ids):
                 events.append(TrackEvent("retracted", tid, keys[0][0], "gone after a replay", True))
         self._prune()
-        return StepResult(tuple(estimates), tuple(events), tuple(refused), len(accepted), tuple(replays), tuple(assoc))
+        points = tuple(
+            MeasuredPoint(d.sensor_id, d.t_ns, d.seq, self.sensors[d.sensor_id].by_dim[d.z.shape[0]].position(d.z))
+            for d in accepted
+        )
+        return StepResult(tuple(estimates), tuple(events), tuple(refused), len(accepted), tuple(replays), tuple(assoc),
+                          points)
 
     # ---- revisions ----------------------------------------------------------------------
     @staticmethod
@@ -391,7 +412,7 @@ class Tracker:
             nt = Track(tr.id, up.state, status, hits, tr.birth_scan, scan_idx, tr.birth_t_ns, tr.origin)
             replace[i] = nt
             assigned_meas[j] = i
-            estimates.append(self._estimate(nt, dets[j], up))
+            estimates.append(self._estimate(nt, dets[j], up, mpos[j]))
         born: list[Track] = []
         capacity = lc.max_tracks - len(ts)
         for j, d in enumerate(dets):
@@ -411,7 +432,7 @@ class Tracker:
             born.append(nt)
             events.append(TrackEvent("born", nt.id, t_ns))
             assoc.append(Association(d.sensor_id, d.t_ns, d.seq, "born", nt.id, None, ()))
-            estimates.append(self._estimate(nt, d, None))
+            estimates.append(self._estimate(nt, d, None, mpos[j]))
 
         # 5. lifecycle sweep over the tracks that existed before this scan (vectorised)
         after = ts.derive(replace, [], None, pos_idx=self._pos_idx, vel_idx=self._vel_idx)
@@ -448,12 +469,13 @@ class Tracker:
         state = init(x, P, t_ns=d.t_ns)
         return Track(tid, state, Status.TENTATIVE, 1, scan_idx, scan_idx, d.t_ns, (d.sensor_id, d.seq))
 
-    def _estimate(self, tr: Track, d: Detection, up: Update | None) -> Estimate:
+    def _estimate(self, tr: Track, d: Detection, up: Update | None, meas_pos: np.ndarray) -> Estimate:
         st = tr.state
         mu = st.mu if isinstance(st, IMMState) else None
         return Estimate(
             tr.id, st.t_ns, d.sensor_id, d.seq, st.x, st.P, tr.status.label, 0,
             None if up is None else up.nis, None if up is None else up.y, None if up is None else up.S, mu,
+            meas_pos.copy(),
         )
 
     # ---- bounded memory ----------------------------------------------------------------
@@ -478,7 +500,7 @@ def _with_revision(e: Estimate, rev: int) -> Estimate:
     if e.revision == rev:
         return e
     return Estimate(e.track_id, e.t_ns, e.sensor_id, e.seq, e.x, e.P, e.status, rev, e.nis, e.y, e.S,
-                    e.mode_probabilities)
+                    e.mode_probabilities, e.meas_pos)
 
 
 def build_tracker(config: TrackerConfig) -> Tracker:
