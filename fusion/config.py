@@ -137,3 +137,63 @@ def decode_tracker_config(data: bytes | str) -> TrackerConfig:
 def load_tracker_config(path: str | Path) -> TrackerConfig:
     """Read a TrackerConfig from a TOML file."""
     return decode_tracker_config(Path(path).read_bytes())
+
+
+class ZenohConfig(Section):
+    """How the service joins Zenoh. The default is an embedded peer that listens on loopback
+    only, with multicast and gossip scouting off: nothing else is needed on the machine.
+    mode "client" connects to `connect` endpoints (a router or another peer)."""
+
+    mode: Literal["peer", "client"] = "peer"
+    listen: list[str] = msgspec.field(default_factory=lambda: ["tcp/127.0.0.1:7447"])
+    connect: list[str] = []
+
+
+class RecordingConfig(Section):
+    """Rerun recordings of every step, rotated by size or duration; names sort by time.
+    `stream` also keeps the raw input (every sample with its arrival time) for `fusion replay`."""
+
+    enabled: bool = True
+    directory: str = "recordings"
+    prefix: str = "fusion"
+    rotate_mb: Annotated[float, msgspec.Meta(gt=0.0)] = 512.0
+    rotate_s: Annotated[float, msgspec.Meta(gt=0.0)] = 3600.0
+    flush_interval_s: Annotated[float, msgspec.Meta(gt=0.0, le=60.0)] = 0.5
+    stream: bool = True
+
+
+class IntakeConfig(Section):
+    """The bounded hand-over from Zenoh threads to the tracker thread. When `queue_max` samples
+    wait, new ones are refused with reason "overload" (counted), so memory stays bounded and
+    Zenoh is never blocked. `batch_max` samples are processed per tracker call."""
+
+    queue_max: Annotated[int, msgspec.Meta(ge=1)] = 200_000
+    batch_max: Annotated[int, msgspec.Meta(ge=1)] = 5_000
+    max_future_wall_s: PosFloat = 3600.0  # refuse sensor times this far ahead of the wall clock
+
+
+class ServiceConfig(Section):
+    """`fusion serve --config FILE`: everything the service needs."""
+
+    tracker: TrackerConfig
+    namespace: str = "demo"
+    zenoh: ZenohConfig = ZenohConfig()
+    recording: RecordingConfig = RecordingConfig()
+    intake: IntakeConfig = IntakeConfig()
+    publish_tentative: bool = False
+    warnings_per_minute: Annotated[int, msgspec.Meta(ge=1)] = 60
+
+
+def decode_service_config(data: bytes | str) -> ServiceConfig:
+    """ServiceConfig from TOML text, with errors that name the field."""
+    try:
+        return msgspec.toml.decode(data, type=ServiceConfig)
+    except msgspec.ValidationError as e:
+        raise ConfigError(f"invalid service configuration: {e}") from e
+    except msgspec.DecodeError as e:
+        raise ConfigError(f"malformed TOML: {e}") from e
+
+
+def load_service_config(path: str | Path) -> ServiceConfig:
+    """Read a ServiceConfig from a TOML file."""
+    return decode_service_config(Path(path).read_bytes())

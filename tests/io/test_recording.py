@@ -1,0 +1,123 @@
+"""Recordings: every step in the .rrd, read back with rerun's reader; inspect; rotation; crashes."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+from collections import Counter
+from pathlib import Path
+
+import numpy as np
+import pytest
+from rerun.chunk import RrdReader
+
+from fusion.io.inspect import summarise
+from fusion.io.recording import RotatingSink
+from fusion.io.rerun_sink import RerunSink, ellipse_points
+from tests.io.scenario_run import latest, maneuver_run
+
+
+def _rows(path: Path) -> dict[str, int]:
+    rows: Counter[str] = Counter()
+    for ch in RrdReader(str(path)).stream():
+        rows[ch.entity_path] += ch.to_record_batch().num_rows
+    return dict(rows)
+
+
+def _record(path: Path, *, batch: int = 1) -> tuple[list, dict]:
+    tr, dets, truth = maneuver_run()
+    results = []
+    with RerunSink(path, layout=tr.layout, position_indices=tr._pos_idx, velocity_indices=tr._vel_idx,
+                   counts=lambda: tr.counts) as sink:
+        for t, x in sorted(truth.items()):
+            sink.log_truth("target", t, x)
+        for i in range(0, len(dets), batch):
+            r = tr.process(dets[i:i + batch])
+            results.append(r)
+            sink.log_step(r)
+    return results, truth
+
+
+def test_every_estimate_is_in_the_recording(tmp_path: Path, rerun_cli: Path) -> None:
+    path = tmp_path / "run.rrd"
+    results, truth = _record(path)
+    rows = _rows(path)
+    per_track = Counter(e.track_id for r in results for e in r.estimates if e.status != "retracted")
+    assert per_track, "the tracker produced no estimates"
+    for tid, n in per_track.items():
+        assert rows[f"/world/tracks/{tid}"] == n
+        assert rows[f"/world/tracks/{tid}/cov"] == n
+        assert rows[f"/tracks/{tid}/state/x"] == n
+        assert rows[f"/tracks/{tid}/std/vy"] == n
+    with_nis = Counter(e.track_id for r in results for e in r.estimates if e.nis is not None)
+    for tid, n in with_nis.items():
+        assert rows[f"/tracks/{tid}/nis"] == n
+        assert rows[f"/tracks/{tid}/nees"] >= n  # truth is known at every measurement time
+    assert rows["/world/truth/target"] == len(truth)
+    assert rows["/world/meas/pos"] == len(truth)
+    assert rows["/events"] >= 2  # born and confirmed
+    out = subprocess.run([str(rerun_cli), "rrd", "verify", str(path)], capture_output=True, text=True, timeout=60)
+    assert out.returncode == 0, out.stderr
+
+
+def test_inspect_matches_own_computation(tmp_path: Path) -> None:
+    path = tmp_path / "run.rrd"
+    results, truth = _record(path)
+    s = summarise(path)
+    assert s.complete and s.dropped_bytes == 0
+    confirmed = {e.track_id for r in results for e in r.estimates if e.status == "confirmed"}
+    assert [int(t.track_id) for t in s.tracks] == sorted(confirmed)
+    est = [e for e in latest(results).values() if e.track_id in confirmed]
+    err = np.array([e.x[[0, 2]] - truth[e.t_ns][[0, 2]] for e in est])
+    nees = [float((e.x - truth[e.t_ns]) @ np.linalg.solve(e.P, e.x - truth[e.t_ns])) for e in est]
+    assert s.position_rmse == pytest.approx(float(np.sqrt(np.mean(np.sum(err**2, axis=1)))), rel=1e-9)
+    assert s.nees.mean == pytest.approx(float(np.mean(nees)), rel=1e-9)
+    assert s.nees.dof == 4 * len(nees)
+    assert s.sensors == {"pos": len(truth)}
+    assert s.counts["applied"] == len(truth) and s.counts["received"] == len(truth)
+    assert json.loads(s.to_json())["nis"]["verdict"] in ("consistent", "too high", "too low")
+
+
+@pytest.mark.parametrize("cut", ["footer", "mid_frame"], ids=["no-footer", "cut-mid-frame"])
+def test_inspect_reads_damaged_files(tmp_path: Path, cut: str) -> None:
+    path = tmp_path / "run.rrd"
+    _record(path)
+    data = path.read_bytes()
+    bad = tmp_path / "bad.rrd"
+    bad.write_bytes(data[:-16] if cut == "footer" else data[: len(data) * 2 // 3])
+    s = summarise(bad)
+    assert not s.complete
+    assert s.tracks, "nothing recovered"
+    if cut == "mid_frame":
+        assert s.dropped_bytes > 0
+
+
+def test_rotation_loses_and_duplicates_nothing(tmp_path: Path) -> None:
+    tr, dets, _ = maneuver_run()
+    sink = RotatingSink(tmp_path, prefix="rot", layout=tr.layout, position_indices=tr._pos_idx,
+                        velocity_indices=tr._vel_idx, rotate_bytes=40_000, rotate_s=1e9, flush_interval_s=0.0)
+    results = []
+    for d in dets:
+        r = tr.process([d])
+        results.append(r)
+        sink.log_step(r)
+    sink.close()
+    assert len(sink.files) >= 3, "no rotation happened"
+    assert [p.name for p in sink.files] == sorted(p.name for p in sink.files)
+    assert sum(sink.steps_per_file) == len(results)
+    total: Counter[str] = Counter()
+    for p in sink.files:
+        for k, v in _rows(p).items():
+            total[k] += v
+    per_track = Counter(e.track_id for r in results for e in r.estimates if e.status != "retracted")
+    for tid, n in per_track.items():
+        assert total[f"/world/tracks/{tid}"] == n
+    assert total["/world/meas/pos"] == len(dets)
+
+
+def test_ellipse_is_two_sigma() -> None:
+    cov = np.array([[4.0, 1.0], [1.0, 2.0]])
+    pts = ellipse_points(np.array([1.0, -1.0]), cov)
+    d = pts - np.array([1.0, -1.0])
+    m = np.einsum("ij,ij->i", d, np.linalg.solve(cov, d.T).T)
+    np.testing.assert_allclose(m, 4.0, rtol=1e-12)
