@@ -66,26 +66,28 @@ def gnn_assign(
     g = coo_matrix((np.ones(ti.size), (ti, n_tracks + mj)), shape=(n_tracks + n_meas,) * 2)
     _, labels = connected_components(g, directed=False)
     comp = labels[ti]
-    out: list[tuple[int, int]] = []
+    sizes = np.bincount(comp, minlength=labels.max() + 1)
+    # Components with one gated pair (the common case) are decided at once: take it if it wins.
+    single = sizes[comp] == 1
+    take = single & (cost < 2.0 * miss_cost)
+    out: list[tuple[int, int]] = list(zip(ti[take].tolist(), mj[take].tolist(), strict=True))
     big = 1e18
-    for c in np.unique(comp):
-        sel = np.flatnonzero(comp == c)
-        if sel.size == 1:
-            p = sel[0]
-            if cost[p] < 2.0 * miss_cost:
-                out.append((int(ti[p]), int(mj[p])))
-            continue
-        ut, it = np.unique(ti[sel], return_inverse=True)
-        um, im = np.unique(mj[sel], return_inverse=True)
-        a, b = ut.size, um.size
-        C = np.full((a + b, b + a), big)
-        C[it, im] = cost[sel]
-        C[np.arange(a), b + np.arange(a)] = miss_cost  # track i left free
-        C[a + np.arange(b), np.arange(b)] = miss_cost  # measurement j left free
-        C[a:, b:] = 0.0
-        r, k = linear_sum_assignment(C)
-        for rr, kk in zip(r, k, strict=True):
-            if rr < a and kk < b and C[rr, kk] < big:
-                out.append((int(ut[rr]), int(um[kk])))
+    rest = np.flatnonzero(~single)
+    if rest.size:
+        order = rest[np.argsort(comp[rest], kind="stable")]
+        bounds = np.flatnonzero(np.diff(comp[order])) + 1
+        for sel in np.split(order, bounds):
+            ut, it = np.unique(ti[sel], return_inverse=True)
+            um, im = np.unique(mj[sel], return_inverse=True)
+            a, b = ut.size, um.size
+            C = np.full((a + b, b + a), big)
+            C[it, im] = cost[sel]
+            C[np.arange(a), b + np.arange(a)] = miss_cost  # track i left free
+            C[a + np.arange(b), np.arange(b)] = miss_cost  # measurement j left free
+            C[a:, b:] = 0.0
+            r, k = linear_sum_assignment(C)
+            for rr, kk in zip(r.tolist(), k.tolist(), strict=True):
+                if rr < a and kk < b and C[rr, kk] < big:
+                    out.append((int(ut[rr]), int(um[kk])))
     out.sort(key=lambda p: (p[1], p[0]))
     return out

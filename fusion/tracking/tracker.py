@@ -28,7 +28,9 @@ from scipy.stats import chi2
 from fusion.config import TrackerConfig
 from fusion.core.association import coarse_pairs, gnn_assign
 from fusion.core.gaussian import GaussianState, Update
-from fusion.core.imm import IMMState
+from fusion.core.imm import IMM, IMMState
+from fusion.core.kalman import ExtendedKalmanFilter, predict_arrays, update_arrays
+from fusion.core.motion import ConstantAcceleration, ConstantVelocity, CoordinatedTurn
 from fusion.core.timebase import NS_PER_S
 from fusion.errors import ConfigError, NumericalError
 from fusion.tracking.detection import Detection, Reason, Refusal
@@ -168,6 +170,10 @@ class Tracker:
         self._newest_ns: int | None = None
         self._seen: dict[tuple[str, int], int] = {}  # (sensor_id, seq) -> t_ns, inside the window
         self.counts: Counter[str] = Counter()
+        # Built-in motion models broadcast over a stack of tracks: gate every candidate pair of a
+        # scan in one vectorised predict + update instead of one filter call per pair.
+        self._batched = isinstance(self.filter, ExtendedKalmanFilter) and isinstance(
+            self.motion, ConstantVelocity | ConstantAcceleration | CoordinatedTurn)
 
     # ---- public views -------------------------------------------------------------------
     @property
@@ -366,25 +372,10 @@ class Tracker:
         # 1-2. coarse then fine gate
         tpos, tvar = ts.predicted_position(t_ns, self._q2)
         ci, cj = coarse_pairs(tpos, tvar, mpos, mvar, k=self._k)
-        preds: dict[int, GaussianState | IMMState] = {}
-        ti: list[int] = []
-        mj: list[int] = []
-        cost: list[float] = []
-        ups: list[Update] = []
-        for i, j in zip(ci.tolist(), cj.tolist(), strict=True):
-            pred = preds.get(i)
-            if pred is None:
-                pred = preds[i] = self.filter.predict(ts.tracks[i].state, t_ns)  # type: ignore[arg-type]
-            try:
-                up = self.filter.update(pred, dets[j].z, models[j], R=Rs[j])  # type: ignore[arg-type]
-            except NumericalError:
-                self.counts["numerical_skips"] += 1
-                continue
-            if up.nis <= self._gate[models[j].ndim_meas]:
-                ti.append(i)
-                mj.append(j)
-                cost.append(up.nis)
-                ups.append(up)
+        if self._batched:
+            ti, mj, cost, ups = self._gate_batched(ts, t_ns, ci, cj, dets, models, Rs)
+        else:
+            ti, mj, cost, ups = self._gate_each(ts, t_ns, ci, cj, dets, models, Rs)
         ti_a, mj_a = np.array(ti, dtype=np.intp), np.array(mj, dtype=np.intp)
         # 3. assignment (miss cost: half the largest gate, so a pair wins when NIS < gate)
         miss = 0.5 * self._gate[max(m.ndim_meas for m in models)]
@@ -456,6 +447,78 @@ class Tracker:
         estimates.sort(key=lambda e: e.track_id)
         return _ScanOut(after, estimates, events, assoc)
 
+    def _gate_each(self, ts: TrackSet, t_ns: int, ci: np.ndarray, cj: np.ndarray, dets: tuple[Detection, ...],
+                   models: list, Rs: list) -> tuple[list[int], list[int], list[float], list[Update]]:
+        """Fine gate, one filter predict + update per candidate pair (any filter, IMM included)."""
+        preds: dict[int, GaussianState | IMMState] = {}
+        ti: list[int] = []
+        mj: list[int] = []
+        cost: list[float] = []
+        ups: list[Update] = []
+        for i, j in zip(ci.tolist(), cj.tolist(), strict=True):
+            pred = preds.get(i)
+            if pred is None:
+                pred = preds[i] = self.filter.predict(ts.tracks[i].state, t_ns)  # type: ignore[arg-type]
+            try:
+                up = self.filter.update(pred, dets[j].z, models[j], R=Rs[j])  # type: ignore[arg-type]
+            except NumericalError:
+                self.counts["numerical_skips"] += 1
+                continue
+            if up.nis <= self._gate[models[j].ndim_meas]:
+                ti.append(i)
+                mj.append(j)
+                cost.append(up.nis)
+                ups.append(up)
+        return ti, mj, cost, ups
+
+    def _gate_batched(self, ts: TrackSet, t_ns: int, ci: np.ndarray, cj: np.ndarray, dets: tuple[Detection, ...],
+                      models: list, Rs: list) -> tuple[list[int], list[int], list[float], list[Update]]:
+        """Fine gate for every candidate pair at once: the EKF equations of fusion.core.kalman on
+        stacks, grouped by measurement dimension. Same math as `_gate_each`."""
+        ti: list[int] = []
+        mj: list[int] = []
+        cost: list[float] = []
+        ups: list[Update] = []
+        if ci.size == 0:
+            return ti, mj, cost, ups
+        m = self.motion
+        X = np.stack([ts.tracks[i].state.x for i in ci.tolist()])
+        P = np.stack([ts.tracks[i].state.P for i in ci.tolist()])
+        dt = (t_ns - ts.t_ns[ci]) * 1e-9
+        F = m.jacobian(X, dt)
+        Xp, Pp = predict_arrays(X, P, F, m.Q(X, dt), None if m.is_linear else m.f(X, dt))
+        dims = np.array([models[j].ndim_meas for j in cj.tolist()])
+        keep: list[tuple[int, int, float, Update]] = []
+        for dim in np.unique(dims):
+            sel = np.flatnonzero(dims == dim)
+            js = cj[sel]
+            # One model of this dimension per sensor: models differ only by R, given per pair.
+            model = models[int(js[0])]
+            Z = np.stack([dets[j].z for j in js.tolist()])
+            R = np.stack([Rs[j] for j in js.tolist()])
+            Xs, Ps = Xp[sel], Pp[sel]
+            Y = model.residual(Z, model.h(Xs))
+            H = model.jacobian(Xs)
+            try:
+                Xn, Pn, S, nis, ll = update_arrays(Xs, Ps, Y, H, R)
+            except NumericalError:  # one bad pair: fall back to pair by pair for this group
+                sub_ti, sub_mj, sub_c, sub_u = self._gate_each(ts, t_ns, ci[sel], js, dets, models, Rs)
+                keep.extend(zip(sub_ti, sub_mj, sub_c, sub_u, strict=True))
+                continue
+            ok = np.flatnonzero(nis <= self._gate[int(dim)])
+            for k in ok.tolist():
+                p = sel[k]
+                up = Update(GaussianState(Xn[k].copy(), Pn[k].copy(), t_ns), Y[k].copy(), S[k].copy(),
+                            float(nis[k]), float(ll[k]))
+                keep.append((int(ci[p]), int(cj[p]), float(nis[k]), up))
+        keep.sort(key=lambda r: (r[1], r[0]))
+        for i, j, c, up in keep:
+            ti.append(i)
+            mj.append(j)
+            cost.append(c)
+            ups.append(up)
+        return ti, mj, cost, ups
+
     def _birth(self, d: Detection, model: object, R: np.ndarray, sm: SensorModel, scan_idx: int) -> Track:
         p = sm.by_dim[d.z.shape[0]].position(d.z)
         Ppos = sm.position_cov(d.z, R)
@@ -465,8 +528,10 @@ class Tracker:
         P = np.diag(self._init_diag)
         P[np.ix_(pi, pi)] = Ppos
         tid = track_id_for(d.sensor_id, d.seq)
-        init = getattr(self.filter, "initial")  # noqa: B009 - every filter has initial()
-        state = init(x, P, t_ns=d.t_ns)
+        if isinstance(self.filter, IMM):
+            state: GaussianState | IMMState = self.filter.initial(x, P, t_ns=d.t_ns)
+        else:  # x and P are built from validated input: no need to check them again
+            state = GaussianState(x, 0.5 * (P + P.T), d.t_ns)
         return Track(tid, state, Status.TENTATIVE, 1, scan_idx, scan_idx, d.t_ns, (d.sensor_id, d.seq))
 
     def _estimate(self, tr: Track, d: Detection, up: Update | None, meas_pos: np.ndarray) -> Estimate:

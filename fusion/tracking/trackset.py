@@ -25,7 +25,10 @@ class Status(IntEnum):
 
     @property
     def label(self) -> str:
-        return self.name.lower()
+        return _LABELS[self]
+
+
+_LABELS = {Status.TENTATIVE: "tentative", Status.CONFIRMED: "confirmed"}
 
 
 def track_id_for(sensor_id: str, seq: int) -> int:

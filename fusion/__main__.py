@@ -1,0 +1,72 @@
+"""The `fusion` command line: parsing only; the work is done by the modules it calls."""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+from pathlib import Path
+
+
+def _inspect(args: argparse.Namespace) -> int:
+    from fusion.io.inspect import format_summary, summarise
+
+    s = summarise(args.file)
+    print(s.to_json() if args.json else format_summary(s))
+    return 0
+
+
+def _serve(args: argparse.Namespace) -> int:
+    import signal
+
+    import msgspec
+
+    from fusion.config import ZenohConfig, load_service_config
+    from fusion.service import Service
+
+    cfg = load_service_config(args.config)
+    if args.listen or args.connect or args.mode:
+        z = cfg.zenoh
+        mode = args.mode or ("client" if args.connect and not args.listen else z.mode)
+        zc = ZenohConfig(mode=mode, listen=args.listen or (z.listen if mode == "peer" else []),
+                         connect=args.connect or z.connect)
+        cfg = msgspec.structs.replace(cfg, zenoh=zc)
+    if args.namespace:
+        cfg = msgspec.structs.replace(cfg, namespace=args.namespace)
+    svc = Service(cfg, recording_dir=args.recordings)
+    signal.signal(signal.SIGTERM, lambda *_: svc.stop())
+    signal.signal(signal.SIGINT, lambda *_: svc.stop())
+    svc.open()
+    print(f"fusion serving namespace {cfg.namespace!r}; recording to {svc.sink.path if svc.sink else 'nothing'}",
+          flush=True)
+    return svc.run(duration_s=args.duration)
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(prog="fusion", description="Streaming sensor fusion over Zenoh.")
+    p.add_argument("-v", "--verbose", action="store_true", help="debug logging")
+    sub = p.add_subparsers(dest="command", required=True)
+
+    sp = sub.add_parser("serve", help="run the fusion service")
+    sp.add_argument("--config", required=True, type=Path, help="service TOML (see configs/)")
+    sp.add_argument("--mode", choices=["peer", "client"], help="override zenoh mode")
+    sp.add_argument("--listen", action="append", help="zenoh endpoint to listen on (repeatable)")
+    sp.add_argument("--connect", action="append", help="zenoh endpoint to connect to (repeatable)")
+    sp.add_argument("--namespace", help="override the key namespace")
+    sp.add_argument("--recordings", type=Path, help="folder for .rrd files (default: the config's)")
+    sp.add_argument("--duration", type=float, help="stop after this many seconds")
+    sp.set_defaults(func=_serve)
+
+    ip = sub.add_parser("inspect", help="summarise a recording (.rrd) headlessly")
+    ip.add_argument("file", type=Path)
+    ip.add_argument("--json", action="store_true", help="print JSON for scripts")
+    ip.set_defaults(func=_inspect)
+
+    args = p.parse_args(argv)
+    logging.basicConfig(level=logging.DEBUG if args.verbose else logging.INFO,
+                        format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    return int(args.func(args))
+
+
+if __name__ == "__main__":
+    sys.exit(main())
