@@ -42,6 +42,31 @@ def _serve(args: argparse.Namespace) -> int:
     return svc.run(duration_s=args.duration)
 
 
+def _record(args: argparse.Namespace) -> int:
+    import signal
+    import threading
+
+    import zenoh
+
+    from fusion.io.recorder import Recorder
+    from fusion.io.zenoh_bus import DEFAULT_ENDPOINT, session_config
+
+    if args.listen:
+        conf = session_config(mode="peer", listen=args.listen, connect=args.connect or [])
+    else:
+        conf = session_config(mode="client", connect=args.connect or [DEFAULT_ENDPOINT])
+    stop = threading.Event()
+    signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    signal.signal(signal.SIGINT, lambda *_: stop.set())
+    with zenoh.open(conf) as session:
+        rec = Recorder(session, args.out, namespace=args.namespace)
+        print(f"recording fusion/{args.namespace}/meas/* and truth/* to {args.out}", flush=True)
+        stop.wait(args.duration)
+        rec.close()
+    print(f"recorded {rec.frames} samples")
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="fusion", description="Streaming sensor fusion over Zenoh.")
     p.add_argument("-v", "--verbose", action="store_true", help="debug logging")
@@ -56,6 +81,14 @@ def main(argv: list[str] | None = None) -> int:
     sp.add_argument("--recordings", type=Path, help="folder for .rrd files (default: the config's)")
     sp.add_argument("--duration", type=float, help="stop after this many seconds")
     sp.set_defaults(func=_serve)
+
+    rp = sub.add_parser("record", help="record measurement and truth samples to a stream file")
+    rp.add_argument("--out", required=True, type=Path, help="the .fstream file to write")
+    rp.add_argument("--namespace", default="demo")
+    rp.add_argument("--connect", action="append", help="zenoh endpoint to connect to (default tcp/127.0.0.1:7447)")
+    rp.add_argument("--listen", action="append", help="listen as a peer instead of connecting")
+    rp.add_argument("--duration", type=float, help="stop after this many seconds (default: until Ctrl-C)")
+    rp.set_defaults(func=_record)
 
     ip = sub.add_parser("inspect", help="summarise a recording (.rrd) headlessly")
     ip.add_argument("file", type=Path)

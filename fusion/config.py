@@ -51,7 +51,7 @@ class MotionConfig(Section):
     """
 
     model: Literal["cv", "ca", "ct", "imm_cv"] = "cv"
-    ndim: Literal[2, 3] = 2
+    ndim: Literal[1, 2, 3] = 2
     q_mps2: NonNegFloat = 1.0
     q_high_mps2: NonNegFloat = 10.0
     q_turn_radps: NonNegFloat = 0.05
@@ -118,6 +118,8 @@ class TrackerConfig(Section):
         if self.motion.model == "ct" and d != 2:
             raise ValueError("the coordinated-turn model is 2-D: set motion.ndim = 2")
         for s in self.sensors:
+            if s.kind == "radar" and d == 1:
+                raise ValueError(f"sensor {s.id}: a radar needs a 2-D or 3-D state (motion.ndim)")
             if s.position_m and len(s.position_m) != d:
                 raise ValueError(f"sensor {s.id}: position_m must have {d} components")
             if s.kind == "cartesian" and len(s.std_m) != d:

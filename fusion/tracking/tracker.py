@@ -23,7 +23,7 @@ from collections.abc import Iterable
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.stats import chi2
+from scipy.special import chdtri
 
 from fusion.config import TrackerConfig
 from fusion.core.association import coarse_pairs, gnn_assign
@@ -154,7 +154,7 @@ class Tracker:
         self._vel_idx = tuple(self.motion.velocity_indices)
         self._n = self.motion.ndim_state
         self._init_diag = initial_covariance_diag(config, self._n, self.motion)
-        self._gate = {m: float(chi2.ppf(config.gate.probability, m)) for m in range(1, 7)}
+        self._gate = {m: float(chdtri(m, 1.0 - config.gate.probability)) for m in range(1, 7)}
         self._k = config.gate.coarse_margin * np.sqrt(max(self._gate.values()))
         q = config.motion.q_high_mps2 if config.motion.model == "imm_cv" else config.motion.q_mps2
         self._q2 = float(q) ** 2

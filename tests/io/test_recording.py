@@ -38,6 +38,16 @@ def _record(path: Path, *, batch: int = 1) -> tuple[list, dict]:
     return results, truth
 
 
+@pytest.fixture(scope="module")
+def rerun_cli() -> Path:
+    """The real rerun binary (not the Python wrapper, which leaves servers behind when killed)."""
+    import rerun_cli as pkg
+
+    exe = Path(pkg.__file__).parent / "rerun"
+    assert exe.exists(), f"rerun CLI not found at {exe}"
+    return exe
+
+
 def test_every_estimate_is_in_the_recording(tmp_path: Path, rerun_cli: Path) -> None:
     path = tmp_path / "run.rrd"
     results, truth = _record(path)

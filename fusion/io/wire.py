@@ -1,0 +1,114 @@
+"""Between the wire (fusion.messages) and the tracker: decode to Detections, encode Estimates."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import asdict
+from typing import Any
+
+import numpy as np
+
+from fusion import messages as m
+from fusion.pipeline import BadSample
+from fusion.tracking.detection import Detection, Reason
+from fusion.tracking.tracker import Estimate
+
+STREAM_SUFFIX = ".fstream"
+
+status_key = m.status_key
+snapshot_key = m.snapshot_key
+track_key = m.track_key
+all_measurements_key = m.all_meas_key
+all_truth_key = m.all_truth_key
+
+
+def is_measurement_key(key: str) -> bool:
+    return "/meas/" in key
+
+
+def detection_of(msg: m.Measurement) -> Detection:
+    """The tracker's view of a wire measurement: z and R in the sensor's measurement space."""
+    d = msg.data
+    if isinstance(d, m.Cartesian):
+        z = np.array(d.pos_m, dtype=np.float64)
+        k = z.shape[0]
+        if d.std_m is not None:
+            R = np.diag(np.square(np.array(d.std_m, dtype=np.float64)))
+        else:
+            R = np.array(d.cov_m2, dtype=np.float64).reshape(k, k)
+    else:
+        vals = [d.range_m, d.bearing_rad]
+        var = [d.range_std_m**2, d.bearing_std_rad**2]
+        if d.elevation_rad is not None:
+            vals.append(d.elevation_rad)
+            var.append(d.elevation_std_rad**2)  # type: ignore[operator]
+        if d.range_rate_mps is not None:
+            vals.append(d.range_rate_mps)
+            var.append(d.range_rate_std_mps**2)  # type: ignore[operator]
+        z = np.array(vals, dtype=np.float64)
+        R = np.diag(var)
+    return Detection(msg.sensor_id, msg.t_ns, msg.seq, z, R)
+
+
+class Codec:
+    """The pipeline's codec for namespace `ns` (see fusion.pipeline.Codec)."""
+
+    def __init__(self, ns: str) -> None:
+        self.ns = ns
+
+    def kind(self, key: str) -> str:
+        return m.key_kind(key)
+
+    def detection(self, payload: bytes) -> Detection:
+        try:
+            msg = m.decode_measurement(payload)
+        except m.MessageError as e:
+            reason = Reason.MALFORMED if str(e).startswith("malformed") else Reason.INVALID
+            raise BadSample(reason, str(e)) from None
+        return detection_of(msg)
+
+    def truth(self, payload: bytes, layout: tuple[str, ...]) -> tuple[str, int, np.ndarray] | None:
+        try:
+            msg = m.decode_truth(payload)
+        except m.MessageError as e:
+            raise BadSample(Reason.MALFORMED if str(e).startswith("malformed") else Reason.INVALID, str(e)) from None
+        return truth_in_layout(msg, layout)
+
+
+def truth_in_layout(msg: m.Truth, layout: tuple[str, ...]) -> tuple[str, int, np.ndarray] | None:
+    """The truth's components reordered into the tracker's layout (None if one is missing)."""
+    by_name = dict(zip(msg.layout, msg.state, strict=True))
+    if not all(n in by_name for n in layout):
+        return None
+    return msg.target_id, msg.t_ns, np.array([by_name[n] for n in layout], dtype=np.float64)
+
+
+def estimate_message(e: Estimate, *, layout: tuple[str, ...], model: str) -> m.Estimate:
+    return m.Estimate(
+        track_id=e.track_id, t_ns=e.t_ns, sensor_id=e.sensor_id, seq=max(e.seq, 0), state=e.x.tolist(),
+        cov=e.P.ravel().tolist(), layout=list(layout) if e.x.size else [], model=model,
+        status=e.status,  # type: ignore[arg-type]
+        revision=e.revision, nis=e.nis,
+        mode_probabilities=None if e.mode_probabilities is None else e.mode_probabilities.tolist(),
+    )
+
+
+def estimate_encoder(layout: tuple[str, ...], model: str) -> Callable[[Estimate], bytes]:
+    def enc(e: Estimate) -> bytes:
+        return m.encode(estimate_message(e, layout=layout, model=model))
+
+    return enc
+
+
+def encode_status(status: dict[str, Any]) -> bytes:
+    c = status["counts"]
+    msg = m.ServiceStatus(
+        uptime_s=status["uptime_s"], counts=m.Counts(**c), tracks=status["tracks"],
+        latency={k: m.LatencyStats(**asdict(v)) for k, v in status["latency"].items()},
+        recording=status["recording"], recording_bytes=status["recording_bytes"], queue_depth=status["queue_depth"],
+    )
+    return m.encode(msg)
+
+
+def encode_snapshot(estimates: list[m.Estimate]) -> bytes:
+    return m.encode(m.Snapshot(estimates=estimates))

@@ -1,0 +1,278 @@
+"""The wire schema: msgspec Structs, msgpack on the wire (JSON for humans and .jsonl files).
+
+Every message is frozen, refuses unknown fields, and carries a schema version `v`. Validation
+happens at decode: NaN and inf are refused (every float has both bounds), angles, ranges and
+standard deviations are bounded, dimensions must match; the error names the field
+(`Expected float >= 0.0, got -1.0 - at $.data.range_std_m`).
+
+Key expressions, under a namespace NS (ids: letters, digits, '_', '-', '.'):
+    fusion/NS/meas/SENSOR_ID     Measurement          (subscribe to fusion/NS/meas/* for all)
+    fusion/NS/truth/TARGET_ID    Truth                (fusion/NS/truth/*)
+    fusion/NS/tracks/TRACK_ID    Estimate             (fusion/NS/tracks/*)
+    fusion/NS/status             ServiceStatus        (queryable)
+    fusion/NS/snapshot           Snapshot             (queryable: latest estimate per confirmed track)
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from typing import Annotated, Literal
+
+import msgspec
+
+from fusion.errors import InputError
+
+SCHEMA_VERSION = 1
+_BIG = 1e15
+Finite = Annotated[float, msgspec.Meta(ge=-_BIG, le=_BIG)]
+Positive = Annotated[float, msgspec.Meta(gt=0.0, le=_BIG)]
+Range = Annotated[float, msgspec.Meta(gt=0.0, le=_BIG)]
+Bearing = Annotated[float, msgspec.Meta(ge=-math.pi, le=math.pi)]
+Elevation = Annotated[float, msgspec.Meta(ge=-math.pi / 2, le=math.pi / 2)]
+Prob = Annotated[float, msgspec.Meta(ge=0.0, le=1.0)]
+TimeNs = Annotated[int, msgspec.Meta(ge=-(2**62), le=2**62)]
+Seq = Annotated[int, msgspec.Meta(ge=0, le=2**62)]
+Id = Annotated[str, msgspec.Meta(pattern=r"^[A-Za-z0-9_.\-]{1,64}$")]
+Version = Annotated[int, msgspec.Meta(ge=1, le=SCHEMA_VERSION)]
+
+
+class Base(msgspec.Struct, frozen=True, forbid_unknown_fields=True, kw_only=True, omit_defaults=True):
+    """Base of every message."""
+
+
+class Cartesian(Base, tag="cartesian", kw_only=True):
+    """A measured position (1-D, 2-D or 3-D) with its noise: per-axis std_m, or a full row-major
+    covariance cov_m2 (d*d values). Exactly one of the two."""
+
+    pos_m: list[Finite]
+    std_m: list[Positive] | None = None
+    cov_m2: list[Finite] | None = None
+
+    def __post_init__(self) -> None:
+        d = len(self.pos_m)
+        if d not in (1, 2, 3):
+            raise ValueError(f"pos_m must have 1, 2 or 3 components, got {d}")
+        if (self.std_m is None) == (self.cov_m2 is None):
+            raise ValueError("give exactly one of std_m and cov_m2")
+        if self.std_m is not None and len(self.std_m) != d:
+            raise ValueError(f"std_m must have {d} components, got {len(self.std_m)}")
+        if self.cov_m2 is not None and len(self.cov_m2) != d * d:
+            raise ValueError(f"cov_m2 must have {d * d} components (row-major), got {len(self.cov_m2)}")
+
+
+class Radar(Base, tag="radar", kw_only=True):
+    """A radar return relative to the sensor's pose: range, bearing, optional elevation (3-D) and
+    range rate, each with its standard deviation (present exactly when the value is)."""
+
+    range_m: Range
+    bearing_rad: Bearing
+    range_std_m: Positive
+    bearing_std_rad: Positive
+    elevation_rad: Elevation | None = None
+    elevation_std_rad: Positive | None = None
+    range_rate_mps: Finite | None = None
+    range_rate_std_mps: Positive | None = None
+
+    def __post_init__(self) -> None:
+        if (self.elevation_rad is None) != (self.elevation_std_rad is None):
+            raise ValueError("elevation_rad and elevation_std_rad go together")
+        if (self.range_rate_mps is None) != (self.range_rate_std_mps is None):
+            raise ValueError("range_rate_mps and range_rate_std_mps go together")
+
+
+class Measurement(Base, tag="measurement", kw_only=True):
+    """One measurement of one sensor at sensor time t_ns (integer nanoseconds)."""
+
+    v: Version = SCHEMA_VERSION
+    sensor_id: Id
+    t_ns: TimeNs
+    seq: Seq
+    data: Cartesian | Radar
+
+
+class Truth(Base, tag="truth", kw_only=True):
+    """The true state of a simulated target; layout names its components (x, vx, y, vy, ...)."""
+
+    v: Version = SCHEMA_VERSION
+    target_id: Id
+    t_ns: TimeNs
+    state: list[Finite]
+    layout: list[str]
+
+    def __post_init__(self) -> None:
+        if len(self.state) != len(self.layout):
+            raise ValueError(f"state has {len(self.state)} components, layout names {len(self.layout)}")
+
+
+class Estimate(Base, tag="estimate", kw_only=True):
+    """A track's estimate after a measurement update. A higher revision replaces an earlier
+    estimate of the same (track_id, t_ns, sensor_id); status "retracted" withdraws it."""
+
+    v: Version = SCHEMA_VERSION
+    track_id: int
+    t_ns: TimeNs
+    sensor_id: str
+    seq: int
+    state: list[float]
+    cov: list[float]  # row-major n*n
+    layout: list[str]
+    model: str
+    status: Literal["tentative", "confirmed", "retracted"]
+    revision: int
+    nis: float | None = None
+    mode_probabilities: list[float] | None = None
+
+
+class LatencyStats(Base, kw_only=True):
+    count: int
+    mean_ms: float
+    p50_ms: float
+    p99_ms: float
+    max_ms: float
+
+
+class Counts(Base, kw_only=True):
+    """received = applied + duplicates + sum(refused.values()) + queued."""
+
+    received: int
+    applied: int
+    duplicates: int
+    refused: dict[str, int]
+    queued: int
+    replays: int
+    late_applied: int
+    published: int
+    truth: int
+
+
+class ServiceStatus(Base, tag="status", kw_only=True):
+    v: Version = SCHEMA_VERSION
+    uptime_s: float
+    counts: Counts
+    tracks: dict[str, int]  # by status
+    latency: dict[str, LatencyStats]  # by sensor: arrival time - sensor time
+    recording: str | None
+    recording_bytes: int
+    queue_depth: int
+
+
+class Snapshot(Base, tag="snapshot", kw_only=True):
+    v: Version = SCHEMA_VERSION
+    estimates: list[Estimate]
+
+
+Message = Measurement | Truth | Estimate | ServiceStatus | Snapshot
+
+_enc = msgspec.msgpack.Encoder()
+_json_enc = msgspec.json.Encoder()
+_dec_meas = msgspec.msgpack.Decoder(Measurement)
+_dec_truth = msgspec.msgpack.Decoder(Truth)
+_dec_est = msgspec.msgpack.Decoder(Estimate)
+_dec_status = msgspec.msgpack.Decoder(ServiceStatus)
+_dec_snap = msgspec.msgpack.Decoder(Snapshot)
+_dec_any = msgspec.msgpack.Decoder(Message)
+_json_any = msgspec.json.Decoder(Message)
+
+
+class MessageError(InputError):
+    """Bytes that do not decode into the expected message; the text names the field."""
+
+
+def encode(msg: Message) -> bytes:
+    """msgpack bytes of a message."""
+    return _enc.encode(msg)
+
+
+def encode_json(msg: Message) -> bytes:
+    """One line of JSON (no newline) of a message."""
+    return _json_enc.encode(msg)
+
+
+def _decode(dec: msgspec.msgpack.Decoder | msgspec.json.Decoder, data: bytes | str, what: str) -> Message:
+    try:
+        return dec.decode(data)
+    except msgspec.ValidationError as e:
+        raise MessageError(f"invalid {what}: {e}") from None
+    except msgspec.DecodeError as e:
+        raise MessageError(f"malformed {what}: {e}") from None
+
+
+def decode_measurement(data: bytes) -> Measurement:
+    return _decode(_dec_meas, data, "measurement")  # type: ignore[return-value]
+
+
+def decode_truth(data: bytes) -> Truth:
+    return _decode(_dec_truth, data, "truth")  # type: ignore[return-value]
+
+
+def decode_estimate(data: bytes) -> Estimate:
+    return _decode(_dec_est, data, "estimate")  # type: ignore[return-value]
+
+
+def decode_status(data: bytes) -> ServiceStatus:
+    return _decode(_dec_status, data, "status")  # type: ignore[return-value]
+
+
+def decode_snapshot(data: bytes) -> Snapshot:
+    return _decode(_dec_snap, data, "snapshot")  # type: ignore[return-value]
+
+
+def decode_any(data: bytes) -> Message:
+    return _decode(_dec_any, data, "message")
+
+
+def decode_json(line: bytes | str) -> Message:
+    """A message from one line of JSON (as written by encode_json)."""
+    return _decode(_json_any, line, "JSON message")
+
+
+# ---- key expressions ---------------------------------------------------------------------------
+_ID = re.compile(r"^[A-Za-z0-9_.\-]{1,64}$")
+
+
+def check_id(what: str, value: str) -> str:
+    """An id safe inside a key expression (no '/', '*', '$', '#', '?', spaces)."""
+    if not _ID.match(value):
+        raise InputError(f"{what} {value!r} must be 1-64 of letters, digits, '_', '-', '.'")
+    return value
+
+
+def meas_key(ns: str, sensor_id: str) -> str:
+    return f"fusion/{check_id('namespace', ns)}/meas/{check_id('sensor_id', sensor_id)}"
+
+
+def truth_key(ns: str, target_id: str) -> str:
+    return f"fusion/{check_id('namespace', ns)}/truth/{check_id('target_id', target_id)}"
+
+
+def track_key(ns: str, track_id: int) -> str:
+    return f"fusion/{check_id('namespace', ns)}/tracks/{int(track_id)}"
+
+
+def all_meas_key(ns: str) -> str:
+    return f"fusion/{check_id('namespace', ns)}/meas/*"
+
+
+def all_truth_key(ns: str) -> str:
+    return f"fusion/{check_id('namespace', ns)}/truth/*"
+
+
+def all_tracks_key(ns: str) -> str:
+    return f"fusion/{check_id('namespace', ns)}/tracks/*"
+
+
+def status_key(ns: str) -> str:
+    return f"fusion/{check_id('namespace', ns)}/status"
+
+
+def snapshot_key(ns: str) -> str:
+    return f"fusion/{check_id('namespace', ns)}/snapshot"
+
+
+def key_kind(key: str) -> str:
+    """"meas", "truth", "tracks", "status", "snapshot" or "other" for a key expression."""
+    parts = key.split("/")
+    if len(parts) >= 3 and parts[0] == "fusion":
+        return parts[2] if parts[2] in ("meas", "truth", "tracks", "status", "snapshot") else "other"
+    return "other"

@@ -1,0 +1,232 @@
+"""The fusion service: Zenoh in, tracker, estimates out over Zenoh, every step to Rerun.
+
+Threads: Zenoh's callback threads only append (arrival_ns, key, payload) to a bounded deque and
+wake the loop; the thread that calls `run` owns the tracker and does everything else. When
+`intake.queue_max` samples wait, new measurement samples are refused with reason "overload"
+(counted), so memory stays bounded and a Zenoh channel is never left undrained.
+
+Queryables (answers prepared by the loop, so callbacks never touch the tracker):
+  fusion/<ns>/status     ServiceStatus (msgpack)
+  fusion/<ns>/snapshot   the latest estimate of every confirmed track (msgpack list)
+Shutdown (SIGINT, SIGTERM or stop()): stop intake, drain the queue, flush and close the
+recording and the stream file, close the Zenoh session.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections import deque
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from fusion.config import ServiceConfig
+from fusion.io import wire
+from fusion.io.recording import RotatingSink
+from fusion.io.zenoh_bus import session_config
+from fusion.pipeline import Pipeline, Record
+from fusion.tracking.tracker import Estimate, Tracker
+
+log = logging.getLogger("fusion.service")
+
+
+class Service:
+    """Build with a ServiceConfig, then `run()` until stopped. One instance, one thread."""
+
+    def __init__(self, config: ServiceConfig, *, recording_dir: str | Path | None = None,
+                 stream_path: str | Path | None = None) -> None:
+        import zenoh
+
+        self._zenoh = zenoh
+        self.config = config
+        self.ns = config.namespace
+        self.tracker = Tracker(config.tracker)
+        rc = config.recording
+        self.sink: RotatingSink | None = None
+        rdir = Path(recording_dir) if recording_dir is not None else Path(rc.directory)
+        if rc.enabled:
+            self.sink = RotatingSink(
+                rdir, prefix=rc.prefix, layout=self.tracker.layout,
+                position_indices=self.tracker._pos_idx, velocity_indices=self.tracker._vel_idx,
+                rotate_bytes=int(rc.rotate_mb * 1e6), rotate_s=rc.rotate_s, flush_interval_s=rc.flush_interval_s,
+                meta={"namespace": self.ns, "sensors": sorted(self.tracker.sensors), "model": self.tracker.model_name},
+                counts=self._counts_for_recording,
+            )
+        self.stream = None
+        if stream_path is not None or (rc.enabled and rc.stream):
+            from fusion.io.streamfile import StreamWriter
+
+            sp = Path(stream_path) if stream_path is not None else self.sink.path.with_suffix(wire.STREAM_SUFFIX)  # type: ignore[union-attr]
+            self.stream = StreamWriter(sp, namespace=self.ns)
+        self.pipeline = Pipeline(
+            self.tracker, wire.Codec(self.ns), sink=self.sink,
+            max_future_wall_ns=round(config.intake.max_future_wall_s * 1e9),
+            publish_tentative=config.publish_tentative, warnings_per_minute=config.warnings_per_minute,
+        )
+        self._q: deque[Record] = deque()
+        self._wake = threading.Event()
+        self._stop = threading.Event()
+        self._arrived = 0  # measurement samples seen by the callback (written by Zenoh threads only)
+        self._overload = 0
+        self._processed = 0
+        self._started_ns = time.time_ns()
+        self._latest: dict[int, Estimate] = {}
+        self._status_payload = b""
+        self._snapshot_payload = b""
+        self._status_at = 0.0
+        self.published = 0
+        self.session: Any = None
+        self._decls: list[Any] = []
+        self.on_publish: Callable[[Estimate], None] | None = None
+
+    # ---- Zenoh side ----------------------------------------------------------------------------
+    def _on_sample(self, sample: Any) -> None:
+        key = str(sample.key_expr)
+        is_meas = wire.is_measurement_key(key)
+        if is_meas:
+            self._arrived += 1
+            if len(self._q) >= self.config.intake.queue_max:
+                self._overload += 1
+                return
+        self._q.append((time.time_ns(), key, sample.payload.to_bytes()))
+        self._wake.set()
+
+    def _on_status(self, query: Any) -> None:
+        query.reply(wire.status_key(self.ns), self._status_payload)
+
+    def _on_snapshot(self, query: Any) -> None:
+        query.reply(wire.snapshot_key(self.ns), self._snapshot_payload)
+
+    def open(self) -> None:
+        """Open the Zenoh session and declare the subscriber and queryables."""
+        zc = self.config.zenoh
+        conf = session_config(mode=zc.mode, listen=zc.listen, connect=zc.connect)
+        self.session = self._zenoh.open(conf)
+        self._refresh_status(force=True)
+        s = self.session
+        self._decls = [
+            s.declare_subscriber(wire.all_measurements_key(self.ns), self._on_sample),
+            s.declare_subscriber(wire.all_truth_key(self.ns), self._on_sample),
+            s.declare_queryable(wire.status_key(self.ns), self._on_status),
+            s.declare_queryable(wire.snapshot_key(self.ns), self._on_snapshot),
+        ]
+        log.info("fusion service on namespace %r, zenoh %s %s", self.ns, zc.mode, zc.listen if zc.mode == "peer"
+                 else zc.connect)
+
+    # ---- the loop ------------------------------------------------------------------------------
+    def stop(self) -> None:
+        self._stop.set()
+        self._wake.set()
+
+    def _drain(self, limit: int) -> list[Record]:
+        q = self._q
+        out = []
+        while q and len(out) < limit:
+            out.append(q.popleft())
+        return out
+
+    def _step(self, batch: list[Record]) -> None:
+        if self.stream is not None:
+            for rec in batch:
+                self.stream.write(*rec)
+        out = self.pipeline.ingest(batch)
+        self._processed += sum(1 for _, k, _ in batch if wire.is_measurement_key(k))
+        enc = wire.estimate_encoder(self.tracker.layout, self.tracker.model_name)
+        BLOCK = self._zenoh.CongestionControl.BLOCK
+        for e in out.to_publish:
+            self.session.put(wire.track_key(self.ns, e.track_id), enc(e), congestion_control=BLOCK)
+            self.published += 1
+            if self.on_publish is not None:
+                self.on_publish(e)
+        for e in out.result.estimates:
+            if e.status == "confirmed":
+                self._latest[e.track_id] = e
+        for ev in out.result.events:
+            if ev.kind in ("deleted", "retracted"):
+                self._latest.pop(ev.track_id, None)
+
+    def run(self, *, duration_s: float | None = None) -> int:
+        """Process until stop() (or a signal handler calling it) or `duration_s`; then shut down."""
+        if self.session is None:
+            self.open()
+        deadline = None if duration_s is None else time.monotonic() + duration_s
+        batch_max = self.config.intake.batch_max
+        try:
+            while not self._stop.is_set():
+                if deadline is not None and time.monotonic() >= deadline:
+                    break
+                batch = self._drain(batch_max)
+                if batch:
+                    self._step(batch)
+                else:
+                    self._wake.wait(0.05)
+                    self._wake.clear()
+                if self.sink is not None:
+                    self.sink.maybe_flush()
+                self._refresh_status()
+        finally:
+            self.shutdown()
+        return 0
+
+    def shutdown(self) -> None:
+        """Stop intake, drain, close the recording and the session (idempotent)."""
+        if self.session is None:
+            return
+        for d in self._decls[:2]:  # subscribers: no more intake
+            d.undeclare()
+        while self._q:
+            self._step(self._drain(self.config.intake.batch_max))
+        self._refresh_status(force=True)
+        for d in self._decls[2:]:
+            d.undeclare()
+        self._decls = []
+        if self.sink is not None:
+            self.sink.close()
+        if self.stream is not None:
+            self.stream.close()
+        self.session.close()
+        self.session = None
+        log.info("fusion service stopped: %s", self.status_dict()["counts"])
+
+    # ---- status --------------------------------------------------------------------------------
+    def _counts_for_recording(self) -> dict[str, int]:
+        c = dict(self.pipeline.counts)
+        c["overload"] = self._overload
+        return c
+
+    def status_dict(self) -> dict[str, Any]:
+        """Counts add up: received = applied + duplicates + sum(refused) + queued."""
+        c = self.pipeline.counts
+        refused = self.pipeline.refused_by_reason()
+        if self._overload:
+            refused["overload"] = self._overload
+        arrived = self._arrived
+        queued = arrived - self._overload - self._processed
+        by_status: dict[str, int] = {}
+        for t in self.tracker.tracks:
+            by_status[t.status.label] = by_status.get(t.status.label, 0) + 1
+        return {
+            "uptime_s": (time.time_ns() - self._started_ns) / 1e9,
+            "counts": {
+                "received": arrived, "applied": c["applied"], "duplicates": c["duplicates"],
+                "refused": refused, "queued": queued, "replays": self.tracker.counts["replays"],
+                "late_applied": self.tracker.counts["late_applied"], "published": self.published,
+                "truth": c["truth"],
+            },
+            "tracks": dict(sorted(by_status.items())),
+            "latency": self.pipeline.latency.stats(),
+            "recording": None if self.sink is None else str(self.sink.path),
+            "recording_bytes": 0 if self.sink is None else self.sink.size_bytes(),
+            "queue_depth": len(self._q),
+        }
+
+    def _refresh_status(self, *, force: bool = False) -> None:
+        now = time.monotonic()
+        if not force and now - self._status_at < 0.1:
+            return
+        self._status_at = now
+        self._status_payload = wire.encode_status(self.status_dict())
+        enc = wire.estimate_encoder(self.tracker.layout, self.tracker.model_name)
+        self._snapshot_payload = wire.encode_snapshot([enc(e) for _, e in sorted(self._latest.items())])

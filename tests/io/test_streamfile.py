@@ -1,0 +1,94 @@
+"""Stream files: every complete frame survives a crash at any byte; .jsonl input; the recorder."""
+
+from __future__ import annotations
+
+import time
+import warnings
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from fusion import messages as m
+from fusion.io.recorder import Recorder
+from fusion.io.streamfile import StreamFormatError, StreamReader, StreamWriter, read_records
+from publishers.publish import publish
+from publishers.spec import load_scenario_file, scenario_path
+from publishers.stream import build_stream
+
+
+def _records(n: int) -> list[tuple[int, str, bytes]]:
+    out = []
+    for i in range(n):
+        msg = m.Measurement(sensor_id="c", t_ns=i, seq=i, data=m.Cartesian(pos_m=[i, 2.0 * i], std_m=[1.0, 1.0]))
+        out.append((1000 + i, "fusion/t/meas/c", m.encode(msg)))
+    return out
+
+
+def test_round_trip(tmp_path: Path) -> None:
+    recs = _records(50)
+    with StreamWriter(tmp_path / "s.fstream", namespace="t") as w:
+        for r in recs:
+            w.write(*r)
+    r = StreamReader(tmp_path / "s.fstream")
+    assert r.meta["namespace"] == "t"
+    assert list(r) == recs
+    assert not r.truncated
+
+
+def test_cut_at_every_byte_of_the_last_frames(tmp_path: Path) -> None:
+    recs = _records(20)
+    full = tmp_path / "s.fstream"
+    ends = []
+    with StreamWriter(full, namespace="t") as w:
+        for r in recs:
+            w.write(*r)
+            ends.append(full.stat().st_size)
+    data = full.read_bytes()
+    cut = tmp_path / "cut.fstream"
+    for size in range(ends[14] - 3, len(data) + 1):
+        cut.write_bytes(data[:size])
+        complete = sum(1 for e in ends if e <= size)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            reader = StreamReader(cut)
+            got = list(reader)
+        assert got == recs[:complete], size
+        partial = size not in ends
+        assert reader.truncated == partial, size
+        assert bool(caught) == partial, size
+
+
+def test_bad_header(tmp_path: Path) -> None:
+    p = tmp_path / "x.fstream"
+    p.write_bytes(b"NOTAFUSIONFILE..")
+    with pytest.raises(StreamFormatError, match="not a fusion stream"):
+        StreamReader(p)
+
+
+def test_jsonl(tmp_path: Path) -> None:
+    recs = _records(3)
+    p = tmp_path / "m.jsonl"
+    p.write_bytes(b"\n".join(m.encode_json(m.decode_measurement(r[2])) for r in recs) + b"\n\n")
+    got, _meta = read_records(p, namespace="t")
+    assert [(k, m.decode_measurement(pl)) for _, k, pl in got] == [(k, m.decode_measurement(pl)) for _, k, pl in recs]
+    bad = tmp_path / "bad.jsonl"
+    bad.write_bytes(b'{"type":"measurement"}\n')
+    with pytest.raises(m.InputError, match=r"bad\.jsonl:1"):
+        list(read_records(bad, namespace="t")[0])
+
+
+def test_recorder_over_zenoh(tmp_path: Path, zenoh_hub: tuple, zenoh_client: Any) -> None:
+    hub, _ = zenoh_hub
+    sf = load_scenario_file(scenario_path("radar2d"))
+    samples, _ = build_stream(sf.scenario, namespace="t")
+    rec = Recorder(hub, tmp_path / "r.fstream", namespace="t")
+    try:
+        publish(zenoh_client(), samples, speed=0.0, match_timeout_s=5.0)
+        deadline = time.monotonic() + 5.0
+        while rec.frames < len(samples) and time.monotonic() < deadline:
+            time.sleep(0.01)
+    finally:
+        rec.close()
+    got = list(StreamReader(tmp_path / "r.fstream"))
+    assert sorted(p for _, _, p in got) == sorted(s.payload for s in samples)

@@ -1,0 +1,103 @@
+"""The wire schema: round trips for every kind, and bad input refused with the field named."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from fusion import messages as m
+
+MEAS = [
+    m.Measurement(sensor_id="cam1", t_ns=10, seq=0, data=m.Cartesian(pos_m=[1.0, 2.0], std_m=[0.5, 0.5])),
+    m.Measurement(sensor_id="cam1", t_ns=10, seq=1, data=m.Cartesian(pos_m=[1.0, 2.0, 3.0],
+                                                                      cov_m2=[1, 0, 0, 0, 1, 0, 0, 0, 1])),
+    m.Measurement(sensor_id="r1", t_ns=-5, seq=7, data=m.Radar(range_m=10.0, bearing_rad=-math.pi, range_std_m=1.0,
+                                                              bearing_std_rad=0.01)),
+    m.Measurement(sensor_id="r1", t_ns=2**61, seq=8, data=m.Radar(
+        range_m=10.0, bearing_rad=1.0, range_std_m=1.0, bearing_std_rad=0.01, elevation_rad=0.2,
+        elevation_std_rad=0.01, range_rate_mps=-3.0, range_rate_std_mps=0.5)),
+]
+OTHERS = [
+    m.Truth(target_id="t0", t_ns=1, state=[1.0, 2.0], layout=["x", "vx"]),
+    m.Estimate(track_id=2**62, t_ns=1, sensor_id="r1", seq=3, state=[1.0, 2.0], cov=[1.0, 0.0, 0.0, 1.0],
+               layout=["x", "vx"], model="cv", status="confirmed", revision=2, nis=1.5, mode_probabilities=[0.3, 0.7]),
+    m.ServiceStatus(uptime_s=1.0, counts=m.Counts(received=3, applied=1, duplicates=1, refused={"invalid": 1},
+                                                   queued=0, replays=0, late_applied=0, published=1, truth=0),
+                    tracks={"confirmed": 1}, latency={"r1": m.LatencyStats(count=1, mean_ms=1, p50_ms=1, p99_ms=1,
+                                                                            max_ms=1)},
+                    recording=None, recording_bytes=0, queue_depth=0),
+]
+
+
+@pytest.mark.parametrize("msg", MEAS + OTHERS, ids=lambda x: type(x).__name__)
+def test_round_trip_msgpack_and_json(msg: m.Message) -> None:
+    assert m.decode_any(m.encode(msg)) == msg
+    assert m.decode_json(m.encode_json(msg)) == msg
+
+
+def test_snapshot_round_trip() -> None:
+    snap = m.Snapshot(estimates=[OTHERS[1]])
+    assert m.decode_snapshot(m.encode(snap)) == snap
+
+
+def _json(data: str, *, sensor: str = '"r1"', extra: str = "") -> bytes:
+    return f'{{"type":"measurement","sensor_id":{sensor},"t_ns":5,"seq":0{extra},"data":{data}}}'.encode()
+
+
+RADAR = '{{"type":"radar","range_m":{r},"bearing_rad":{b},"range_std_m":{s},"bearing_std_rad":0.01}}'
+BAD = {
+    "huge": (_json('{"type":"cartesian","pos_m":[1,1e300],"std_m":[1,1]}'), "pos_m"),
+    "angle": (_json(RADAR.format(r=10, b=4.0, s=1)), "bearing_rad"),
+    "negative-std": (_json(RADAR.format(r=10, b=0.1, s=-1)), "range_std_m"),
+    "zero-range": (_json(RADAR.format(r=0, b=0.1, s=1)), "range_m"),
+    "dimension": (_json('{"type":"cartesian","pos_m":[1,2],"std_m":[1]}'), "std_m must have 2"),
+    "cov-dimension": (_json('{"type":"cartesian","pos_m":[1,2],"cov_m2":[1,0,1]}'), "cov_m2 must have 4"),
+    "both-noises": (_json('{"type":"cartesian","pos_m":[1,2],"std_m":[1,1],"cov_m2":[1,0,0,1]}'), "exactly one"),
+    "unknown-field": (_json(RADAR.format(r=10, b=0.1, s=1), extra=',"colour":1'), "unknown field `colour`"),
+    "missing-field": (b'{"type":"measurement","sensor_id":"r1","t_ns":5,"data":{"type":"cartesian","pos_m":[1],'
+                      b'"std_m":[1]}}', "missing required field `seq`"),
+    "wrong-type": (_json(RADAR.format(r='"far"', b=0.1, s=1)), "range_m"),
+    "bad-id": (_json(RADAR.format(r=10, b=0.1, s=1), sensor='"a/b"'), "sensor_id"),
+    "half-range-rate": (_json('{"type":"radar","range_m":1,"bearing_rad":0,"range_std_m":1,"bearing_std_rad":0.1,'
+                              '"range_rate_mps":1}'), "range_rate_mps and range_rate_std_mps"),
+}
+
+
+@pytest.mark.parametrize(("data", "field"), BAD.values(), ids=BAD.keys())
+def test_bad_input_names_the_field(data: bytes, field: str) -> None:
+    with pytest.raises(m.MessageError, match="invalid") as e:
+        m.decode_json(data)
+    assert field in str(e.value)
+    import msgspec
+
+    with pytest.raises(m.MessageError, match="invalid"):  # the same refusal in msgpack
+        m.decode_measurement(msgspec.msgpack.encode(msgspec.json.decode(data)))
+
+
+@pytest.mark.parametrize("bad", [math.nan, math.inf, -math.inf], ids=["nan", "inf", "-inf"])
+def test_non_finite_in_msgpack_is_refused(bad: float) -> None:
+    raw = m.encode(m.Measurement(sensor_id="a", t_ns=1, seq=0, data=m.Cartesian(pos_m=[1.0, bad], std_m=[1, 1])))
+    with pytest.raises(m.MessageError, match=r"\$\.data\.pos_m\[1\]"):
+        m.decode_measurement(raw)
+
+
+def test_nan_is_not_json() -> None:
+    with pytest.raises(m.MessageError, match="malformed"):
+        m.decode_json(_json(RADAR.format(r="NaN", b=0.1, s=1)))
+
+
+def test_truncated_bytes_are_malformed() -> None:
+    raw = m.encode(MEAS[0])
+    with pytest.raises(m.MessageError, match="malformed"):
+        m.decode_measurement(raw[:-2])
+
+
+def test_keys() -> None:
+    assert m.meas_key("ns", "r1") == "fusion/ns/meas/r1"
+    assert m.all_meas_key("ns") == "fusion/ns/meas/*"
+    assert m.track_key("ns", 12) == "fusion/ns/tracks/12"
+    assert m.key_kind("fusion/ns/truth/t0") == "truth"
+    for bad in ("a/b", "a*", "", "x y", "$x"):
+        with pytest.raises(m.InputError):
+            m.meas_key("ns", bad)
