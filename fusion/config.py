@@ -187,13 +187,18 @@ class ServiceConfig(Section):
 
 
 def decode_service_config(data: bytes | str) -> ServiceConfig:
-    """ServiceConfig from TOML text, with errors that name the field."""
+    """ServiceConfig from TOML text, with errors that name the field. A scenario file
+    (configs/scenarios/*.toml) works too: its [service] table is the service's configuration."""
     try:
-        return msgspec.toml.decode(data, type=ServiceConfig)
-    except msgspec.ValidationError as e:
-        raise ConfigError(f"invalid service configuration: {e}") from e
+        raw = msgspec.toml.decode(data)
     except msgspec.DecodeError as e:
         raise ConfigError(f"malformed TOML: {e}") from e
+    if isinstance(raw, dict) and "service" in raw and "tracker" not in raw:
+        raw = raw["service"]
+    try:
+        return msgspec.convert(raw, type=ServiceConfig)
+    except msgspec.ValidationError as e:
+        raise ConfigError(f"invalid service configuration: {e}") from e
 
 
 def load_service_config(path: str | Path) -> ServiceConfig:

@@ -194,8 +194,9 @@ def _decode(dec: msgspec.msgpack.Decoder | msgspec.json.Decoder, data: bytes | s
         return dec.decode(data)
     except msgspec.ValidationError as e:
         raise MessageError(f"invalid {what}: {e}") from None
-    except msgspec.DecodeError as e:
-        raise MessageError(f"malformed {what}: {e}") from None
+    except (msgspec.DecodeError, UnicodeDecodeError, ValueError, OverflowError) as e:
+        # msgspec raises UnicodeDecodeError for invalid UTF-8 in a string, not DecodeError
+        raise MessageError(f"malformed {what}: {type(e).__name__}: {e}") from None
 
 
 def decode_measurement(data: bytes) -> Measurement:

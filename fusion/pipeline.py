@@ -117,6 +117,10 @@ class Pipeline:
             except BadSample as e:
                 self._refuse(e.reason, key, e.detail)
                 continue
+            except Exception as e:  # a decoder bug must cost one sample, never the service
+                log.exception("unexpected error decoding a sample on %s", key)
+                self._refuse(Reason.MALFORMED, key, f"{type(e).__name__}: {e}")
+                continue
             if self.max_future_wall_ns is not None and d.t_ns > arrival_ns + self.max_future_wall_ns:
                 self._refuse(Reason.FUTURE, key, f"sensor time {(d.t_ns - arrival_ns) / 1e9:.1f} s ahead of arrival",
                              d.t_ns)

@@ -25,6 +25,7 @@ from typing import Any
 from fusion.config import ServiceConfig
 from fusion.io import wire
 from fusion.io.recording import RotatingSink
+from fusion.io.rerun_sink import RerunSink
 from fusion.io.zenoh_bus import session_config
 from fusion.pipeline import Pipeline, Record
 from fusion.tracking.tracker import Estimate, Tracker
@@ -36,7 +37,10 @@ class Service:
     """Build with a ServiceConfig, then `run()` until stopped. One instance, one thread."""
 
     def __init__(self, config: ServiceConfig, *, recording_dir: str | Path | None = None,
-                 stream_path: str | Path | None = None) -> None:
+                 recording_path: str | Path | None = None, stream_path: str | Path | None = None) -> None:
+        """recording_path: one file, no rotation (fusion demo); otherwise rotating files in
+        recording_dir (default: the config's). stream_path: where the raw input goes (default:
+        beside the first recording, when [recording] stream is on)."""
         import zenoh
 
         self._zenoh = zenoh
@@ -44,18 +48,21 @@ class Service:
         self.ns = config.namespace
         self.tracker = Tracker(config.tracker)
         rc = config.recording
-        self.sink: RotatingSink | None = None
+        self.sink: RotatingSink | RerunSink | None = None
         rdir = Path(recording_dir) if recording_dir is not None else Path(rc.directory)
-        if rc.enabled:
-            self.sink = RotatingSink(
-                rdir, prefix=rc.prefix, layout=self.tracker.layout,
-                position_indices=self.tracker._pos_idx, velocity_indices=self.tracker._vel_idx,
-                rotate_bytes=int(rc.rotate_mb * 1e6), rotate_s=rc.rotate_s, flush_interval_s=rc.flush_interval_s,
-                meta={"namespace": self.ns, "sensors": sorted(self.tracker.sensors), "model": self.tracker.model_name},
-                counts=self._counts_for_recording,
-            )
+        common: dict[str, Any] = dict(
+            layout=self.tracker.layout, position_indices=self.tracker._pos_idx,
+            velocity_indices=self.tracker._vel_idx, flush_interval_s=rc.flush_interval_s,
+            meta={"namespace": self.ns, "sensors": sorted(self.tracker.sensors), "model": self.tracker.model_name},
+            counts=self._counts_for_recording,
+        )
+        if recording_path is not None:
+            self.sink = RerunSink(recording_path, recording_id=Path(recording_path).stem, **common)
+        elif rc.enabled:
+            self.sink = RotatingSink(rdir, prefix=rc.prefix, rotate_bytes=int(rc.rotate_mb * 1e6),
+                                     rotate_s=rc.rotate_s, **common)
         self.stream = None
-        if stream_path is not None or (rc.enabled and rc.stream):
+        if stream_path is not None or (self.sink is not None and rc.stream):
             from fusion.io.streamfile import StreamWriter
 
             sp = Path(stream_path) if stream_path is not None else self.sink.path.with_suffix(wire.STREAM_SUFFIX)  # type: ignore[union-attr]
@@ -71,6 +78,7 @@ class Service:
         self._arrived = 0  # measurement samples seen by the callback (written by Zenoh threads only)
         self._overload = 0
         self._processed = 0
+        self._settled = 0  # samples fully handled (published, status refreshed) when the queue last emptied
         self._started_ns = time.time_ns()
         self._latest: dict[int, Estimate] = {}
         self._status_payload = b""
@@ -160,6 +168,9 @@ class Service:
                 batch = self._drain(batch_max)
                 if batch:
                     self._step(batch)
+                    if not self._q:  # caught up: make the status answer current at once
+                        self._refresh_status(force=True)
+                        self._settled = self._processed + self._overload
                 else:
                     self._wake.wait(0.05)
                     self._wake.clear()
@@ -194,6 +205,8 @@ class Service:
     def _counts_for_recording(self) -> dict[str, int]:
         c = dict(self.pipeline.counts)
         c["overload"] = self._overload
+        for k in ("replays", "late_applied", "replayed_scans"):
+            c[k] = self.tracker.counts[k]
         return c
 
     def status_dict(self) -> dict[str, Any]:
@@ -218,9 +231,28 @@ class Service:
             "tracks": dict(sorted(by_status.items())),
             "latency": self.pipeline.latency.stats(),
             "recording": None if self.sink is None else str(self.sink.path),
-            "recording_bytes": 0 if self.sink is None else self.sink.size_bytes(),
+            "recording_bytes": 0 if self.sink is None else self._recording_bytes(),
             "queue_depth": len(self._q),
         }
+
+    def _recording_bytes(self) -> int:
+        if isinstance(self.sink, RotatingSink):
+            return self.sink.size_bytes()
+        return self.sink.path.stat().st_size if self.sink is not None and self.sink.path.exists() else 0
+
+    def wait_idle(self, *, quiet_s: float = 0.3, timeout_s: float = 60.0) -> bool:
+        """Wait (from another thread) until every sample that arrived is handled (estimates
+        published, status answer current) and nothing new arrived for quiet_s."""
+        deadline = time.monotonic() + timeout_s
+        last, since = -1, time.monotonic()
+        while time.monotonic() < deadline:
+            n = self._arrived
+            if n != last or self._q:
+                last, since = n, time.monotonic()
+            elif time.monotonic() - since >= quiet_s and self._settled >= n:
+                return True
+            time.sleep(0.01)
+        return False
 
     def _refresh_status(self, *, force: bool = False) -> None:
         now = time.monotonic()
@@ -228,5 +260,6 @@ class Service:
             return
         self._status_at = now
         self._status_payload = wire.encode_status(self.status_dict())
-        enc = wire.estimate_encoder(self.tracker.layout, self.tracker.model_name)
-        self._snapshot_payload = wire.encode_snapshot([enc(e) for _, e in sorted(self._latest.items())])
+        layout, model = self.tracker.layout, self.tracker.model_name
+        self._snapshot_payload = wire.encode_snapshot(
+            [wire.estimate_message(e, layout=layout, model=model) for _, e in sorted(self._latest.items())])

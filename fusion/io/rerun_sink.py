@@ -13,7 +13,7 @@ Entity layout (all positions in metres, world frame; 3-D tracks use the 3-D arch
   world/truth/<target_id>            true position
   tracks/<track_id>/state/<name>     every state component (Scalars)
   tracks/<track_id>/std/<name>       sqrt(diag(P))
-  tracks/<track_id>/truth/<name>     matched truth component, where truth is known
+  tracks/<track_id>/truth/<name>     truth of the nearest true target at the same time, if within MATCH_D2
   tracks/<track_id>/error/<name>     estimate - truth
   tracks/<track_id>/nis              NIS of the update (degrees of freedom in tracks/<track_id>/nis_dof)
   tracks/<track_id>/nees             NEES against the matched truth
@@ -39,6 +39,7 @@ import numpy as np
 from fusion.core.checks import Array
 from fusion.tracking.tracker import Estimate, StepResult
 
+MATCH_D2 = 100.0  # squared Mahalanobis distance (position) within which a truth target is matched
 _COLOURS = {"tentative": (160, 160, 160), "confirmed": (40, 160, 255)}
 _CIRCLE = np.stack([np.cos(np.linspace(0, 2 * np.pi, 33)), np.sin(np.linspace(0, 2 * np.pi, 33))], axis=1)
 
@@ -82,7 +83,7 @@ class RerunSink:
         self.layout = layout
         self.pi = list(position_indices)
         self.vi = list(velocity_indices)
-        self.ndim = len(position_indices)
+        self.ndim = len(position_indices)  # 1-D tracks are drawn on the x axis of a 2-D view
         self._cols: dict[str, _Column] = {}
         self._pending = 0
         self.rows_written = 0
@@ -116,15 +117,22 @@ class RerunSink:
     def _scalar(self, entity: str, t_ns: int, value: float, arrival_ns: int | None = None) -> None:
         self._row(entity, "scalar", t_ns, arrival_ns, v=float(value))
 
+    def _world(self, p: Array) -> Array:
+        """A point (or points) for the world view: 1-D positions go on the x axis."""
+        p = np.asarray(p, dtype=np.float64)
+        if p.shape[-1] == 1:
+            return np.concatenate([p, np.zeros_like(p)], axis=-1)
+        return p
+
     def log_measurements(self, sensor_id: str, t_ns: int, points: Array, arrival_ns: int | None = None) -> None:
         """Measured points (k, d) of one scan, in Cartesian world coordinates."""
-        self._row(f"world/meas/{sensor_id}", "points", t_ns, arrival_ns, p=np.asarray(points, dtype=np.float64))
+        self._row(f"world/meas/{sensor_id}", "points", t_ns, arrival_ns, p=self._world(points))
 
     def log_truth(self, target_id: str, t_ns: int, state: Array) -> None:
         """A true state in the tracker's layout; kept to score estimates at the same t_ns."""
         s = np.asarray(state, dtype=np.float64)
         self._truth[t_ns][target_id] = s
-        self._row(f"world/truth/{target_id}", "points", t_ns, None, p=s[self.pi][None, :])
+        self._row(f"world/truth/{target_id}", "points", t_ns, None, p=self._world(s[self.pi])[None, :])
         if len(self._truth) > 100_000:  # bounded: drop the oldest times
             for k in sorted(self._truth)[:50_000]:
                 del self._truth[k]
@@ -155,21 +163,24 @@ class RerunSink:
     def _estimate(self, e: Estimate, arrival_ns: int | None) -> None:
         base = f"tracks/{e.track_id}"
         if e.status == "retracted":
-            self.log_text(e.t_ns, f"track {e.track_id} estimate at sensor {e.sensor_id} retracted (rev {e.revision})")
+            self.log_text(e.t_ns, f"track {e.track_id} retracted its estimate from {e.sensor_id} (rev {e.revision})")
             return
         t = e.t_ns
         x, P = e.x, e.P
-        pos = x[self.pi]
+        pos = self._world(x[self.pi])
         self._row(f"world/{base}", "track", t, arrival_ns, p=pos, status=e.status)
         Pp = P[np.ix_(self.pi, self.pi)]
-        if self.ndim == 2:
+        if self.ndim == 1:
+            half = 2.0 * np.sqrt(Pp[0, 0])
+            self._row(f"world/{base}/cov", "strip", t, arrival_ns, s=pos + np.array([[-half, 0.0], [half, 0.0]]))
+        elif self.ndim == 2:
             self._row(f"world/{base}/cov", "strip", t, arrival_ns, s=ellipse_points(pos, Pp))
         else:
             self._row(f"world/{base}/cov", "ellipsoid", t, arrival_ns, c=pos, cov=Pp)
         if self.vi:
-            self._row(f"world/{base}/vel", "arrow", t, arrival_ns, o=pos, v=x[self.vi])
+            self._row(f"world/{base}/vel", "arrow", t, arrival_ns, o=pos, v=self._world(x[self.vi]))
         if e.meas_pos is not None:
-            self._row(f"world/{base}/meas", "points", t, arrival_ns, p=e.meas_pos[None, :])
+            self._row(f"world/{base}/meas", "points", t, arrival_ns, p=self._world(e.meas_pos)[None, :])
         std = np.sqrt(np.clip(np.diagonal(P), 0.0, None))
         for name, xv, sv in zip(self.layout, x, std, strict=True):
             self._scalar(f"{base}/state/{name}", t, xv, arrival_ns)
@@ -184,9 +195,14 @@ class RerunSink:
         if truth:
             names = sorted(truth)
             T = np.stack([truth[n] for n in names])
-            k = int(np.argmin(np.linalg.norm(T[:, self.pi] - pos, axis=1)))
+            dp = T[:, self.pi] - x[self.pi]
+            d2 = np.einsum("ij,ij->i", dp, np.linalg.solve(Pp, dp.T).T)
+            k = int(np.argmin(d2))
             tx = T[k]
-            if tx.shape == x.shape:
+            # Score against the nearest true target, and only when it is plausibly this track's
+            # (d2 < MATCH_D2): a truth sample that has not arrived yet must not pair the track
+            # with another target.
+            if tx.shape == x.shape and d2[k] < MATCH_D2:
                 err = x - tx
                 for name, tv, ev in zip(self.layout, tx, err, strict=True):
                     self._scalar(f"{base}/truth/{name}", t, tv, arrival_ns)
@@ -220,7 +236,7 @@ class RerunSink:
                 columns = rr.TextLog.columns(text=d["text"], level=d["level"])
             elif c.kind == "points":
                 lens = [len(p) for p in d["p"]]
-                pts = np.concatenate(d["p"]) if n else np.empty((0, self.ndim))
+                pts = np.concatenate(d["p"]) if n else np.empty((0, max(self.ndim, 2)))
                 arch = rr.Points2D if pts.shape[1] == 2 else rr.Points3D
                 columns = arch.columns(positions=pts).partition(lens)
             elif c.kind == "track":
@@ -242,7 +258,7 @@ class RerunSink:
                     centers=np.stack(d["c"]), half_sizes=np.stack(half), quaternions=np.stack(quat)
                 )
             elif c.kind == "arrow":
-                arch = rr.Arrows2D if self.ndim == 2 else rr.Arrows3D
+                arch = rr.Arrows2D if self.ndim <= 2 else rr.Arrows3D
                 columns = arch.columns(origins=np.stack(d["o"]), vectors=np.stack(d["v"]))
             else:  # pragma: no cover - every kind above is produced by this class
                 raise AssertionError(c.kind)
@@ -270,7 +286,7 @@ class RerunSink:
     def _send_blueprint(self) -> None:
         import rerun.blueprint as rrb
 
-        world = rrb.Spatial2DView(origin="world", name="Trajectories") if self.ndim == 2 else rrb.Spatial3DView(
+        world = rrb.Spatial2DView(origin="world", name="Trajectories") if self.ndim <= 2 else rrb.Spatial3DView(
             origin="world", name="Trajectories")
         bp = rrb.Blueprint(
             rrb.Horizontal(

@@ -1,0 +1,92 @@
+"""Run the real service in a thread on a loopback peer, for tests."""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
+
+import msgspec
+
+from fusion import messages as m
+from fusion.config import ServiceConfig, ZenohConfig
+from fusion.io.zenoh_bus import free_tcp_port, session_config
+from fusion.service import Service
+from publishers.spec import load_scenario_file, scenario_path
+
+
+def scenario_config(name: str) -> tuple[Any, ServiceConfig]:
+    sf = load_scenario_file(scenario_path(name))
+    return sf.scenario, sf.service
+
+
+@contextmanager
+def running_service(cfg: ServiceConfig, tmp: Path) -> Iterator[tuple[Service, str]]:
+    """A started service listening on a free loopback port; stopped (and joined) on exit."""
+    endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
+    cfg = msgspec.structs.replace(cfg, zenoh=ZenohConfig(mode="peer", listen=[endpoint]))
+    svc = Service(cfg, recording_path=tmp / "live.rrd", stream_path=tmp / "live.fstream")
+    svc.open()
+    t = threading.Thread(target=svc.run, name="service-under-test")
+    t.start()
+    try:
+        yield svc, endpoint
+    finally:
+        svc.stop()
+        t.join(timeout=60)
+        assert not t.is_alive(), "the service did not stop"
+
+
+def client(endpoint: str) -> Any:
+    import zenoh
+
+    return zenoh.open(session_config(mode="client", connect=[endpoint]))
+
+
+class EstimateCollector:
+    """Subscribes to fusion/<ns>/tracks/* and keeps every estimate received."""
+
+    def __init__(self, session: Any, ns: str) -> None:
+        self.got: list[m.Estimate] = []
+        self._lock = threading.Lock()
+        self.sub = session.declare_subscriber(m.all_tracks_key(ns), self._cb)
+        # A put right after a subscriber is declared elsewhere can miss it (propagation takes
+        # up to ~10 ms here); the service's puts have no publisher whose matching status we could
+        # wait on, so give the declaration time to arrive.
+        time.sleep(0.2)
+
+    def _cb(self, sample: Any) -> None:
+        e = m.decode_estimate(sample.payload.to_bytes())
+        with self._lock:
+            self.got.append(e)
+
+    def snapshot(self) -> list[m.Estimate]:
+        with self._lock:
+            return list(self.got)
+
+
+def latest(estimates: list[m.Estimate], *, keep_revision: bool = True) -> dict[tuple[int, int, str], m.Estimate]:
+    """The consumer's view: latest revision per (track, time, sensor); retractions remove.
+    keep_revision=False zeroes the revision: how many times a value was revised depends on
+    how arrivals were batched, the final value does not."""
+    out: dict[tuple[int, int, str], m.Estimate] = {}
+    for e in estimates:
+        k = (e.track_id, e.t_ns, e.sensor_id)
+        if k in out and out[k].revision > e.revision:
+            continue
+        if e.status == "retracted":
+            out.pop(k, None)
+        else:
+            out[k] = e
+    if not keep_revision:
+        out = {k: msgspec.structs.replace(e, revision=0) for k, e in out.items()}
+    return out
+
+
+def query(session: Any, key: str) -> bytes:
+    replies = list(session.get(key, timeout=5.0))
+    assert replies, f"no reply on {key}"
+    return replies[0].ok.payload.to_bytes()

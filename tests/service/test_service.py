@@ -1,0 +1,252 @@
+"""The service end to end over real in-process Zenoh sessions on loopback."""
+
+from __future__ import annotations
+
+import math
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import msgspec
+import numpy as np
+import pytest
+
+from fusion import messages as m
+from fusion.io import wire
+from fusion.io.streamfile import StreamReader
+from fusion.io.zenoh_bus import free_tcp_port
+from fusion.pipeline import Pipeline
+from fusion.replay import replay
+from fusion.scenarios import REFERENCE_NAMES
+from fusion.tracking.tracker import Tracker
+from publishers.publish import publish
+from publishers.stream import build_stream
+from tests.service.harness import EstimateCollector, client, latest, query, running_service, scenario_config
+
+RERUN = Path(__import__("rerun_cli").__file__).parent / "rerun"
+
+
+def _offline(cfg, stream: Path) -> list[m.Estimate]:
+    """The same input through the tracker offline: what the service should have published."""
+    tracker = Tracker(cfg.tracker)
+    pipe = Pipeline(tracker, wire.Codec(cfg.namespace), publish_tentative=cfg.publish_tentative)
+    enc = wire.estimate_encoder(tracker.layout, tracker.model_name)
+    out = []
+    for rec in StreamReader(stream):
+        out.extend(m.decode_estimate(enc(e)) for e in pipe.ingest([rec]).to_publish)
+    return out
+
+
+def _run_live(name: str, tmp: Path, *, duration_s: float | None = None, speed: float = 0.0):
+    spec, cfg = scenario_config(name)
+    if duration_s is not None:
+        spec = msgspec.structs.replace(spec, duration_s=duration_s)
+    samples, _ = build_stream(spec, namespace=cfg.namespace)
+    with running_service(cfg, tmp) as (svc, endpoint):
+        sub_session = client(endpoint)
+        try:
+            col = EstimateCollector(sub_session, cfg.namespace)
+            pub_session = client(endpoint)
+            try:
+                counts = publish(pub_session, samples, speed=speed, match_timeout_s=5.0)
+            finally:
+                pub_session.close()
+            assert svc.wait_idle(timeout_s=60.0)
+            deadline = time.monotonic() + 5.0
+            while len(col.snapshot()) < svc.published and time.monotonic() < deadline:
+                time.sleep(0.01)
+            got = col.snapshot()
+        finally:
+            sub_session.close()
+    return cfg, samples, counts, got, svc
+
+
+@pytest.mark.parametrize("name", REFERENCE_NAMES, ids=str)
+def test_reference_scenario_end_to_end(name: str, tmp_path: Path) -> None:
+    cfg, samples, counts, got, svc = _run_live(name, tmp_path)
+    n_meas = sum(1 for s in samples if "/meas/" in s.key)
+    assert counts["meas"] == n_meas
+    assert len(got) == svc.published > 0, "estimates published and received differ"
+    st = svc.status_dict()["counts"]
+    assert st["received"] == n_meas == st["applied"]
+    # exactly what the tracker produces offline on the same input
+    offline = _offline(cfg, tmp_path / "live.fstream")
+    assert latest(got) == latest(offline)
+    assert sorted(msgspec.json.encode(e) for e in got) == sorted(msgspec.json.encode(e) for e in offline)
+    confirmed = {e.track_id for e in got if e.status == "confirmed"}
+    assert len(confirmed) == 1, f"one target, {len(confirmed)} confirmed tracks"
+
+
+def test_replay_equals_live_and_is_deterministic(tmp_path: Path) -> None:
+    # 20x real time: small batches, so jittered arrivals reach the tracker late and force replays
+    _, _, _, got, svc = _run_live("mix", tmp_path, duration_s=8.0, speed=20.0)
+    assert svc.tracker.counts["late_applied"] > 0, "the mix should deliver late measurements"
+    stream = tmp_path / "live.fstream"
+    est_a, est_b = tmp_path / "a.jsonl", tmp_path / "b.jsonl"
+    ra = replay(stream, out=tmp_path / "a.rrd", estimates=est_a)
+    replay(stream, out=tmp_path / "b.rrd", estimates=est_b)
+    assert est_a.read_bytes() == est_b.read_bytes(), "two replays differ"
+    replayed = [m.decode_json(line) for line in est_a.read_bytes().splitlines()]
+    assert ra.estimates == len(replayed)
+    assert len(got) == svc.published, "the live subscriber missed estimates"
+    assert latest(replayed, keep_revision=False) == latest(got, keep_revision=False), \
+        "replay differs from what the live service published"
+
+
+GOOD_SENSOR = "cam1"
+
+
+def _good_and_bad(ns: str) -> tuple[list[tuple[str, bytes]], dict[str, int], int]:
+    """1000 good measurements of the mix's camera and 1000 bad messages of every kind, interleaved."""
+    rng = np.random.default_rng(11)
+    good = []
+    for k in range(1000):
+        t = (k // 5 + 1) * 100_000_000
+        msg = m.Measurement(sensor_id=GOOD_SENSOR, t_ns=t, seq=k,
+                            data=m.Cartesian(pos_m=[100.0 * (k % 5) + rng.normal(), 50.0 + rng.normal()],
+                                             std_m=[3.0, 3.0]))
+        good.append((m.meas_key(ns, GOOD_SENSOR), m.encode(msg)))
+    key = m.meas_key(ns, GOOD_SENSOR)
+
+    def meas(**kw) -> m.Measurement:
+        base = dict(sensor_id=GOOD_SENSOR, t_ns=50_000_000, seq=0,
+                    data=m.Cartesian(pos_m=[1.0, 2.0], std_m=[1.0, 1.0]))
+        base.update(kw)
+        return m.Measurement(**base)
+
+    kinds = {
+        # random bytes: refused as malformed, or as invalid when they happen to decode as msgpack
+        "malformed": lambda i, j: (key, bytes(rng.integers(0, 256, 12, dtype=np.uint8))),
+        "invalid": lambda i, j: (key, msgspec.msgpack.encode({"type": "measurement", "sensor_id": GOOD_SENSOR,
+                                                              "t_ns": 1, "seq": 5000 + i, "data": {"type": "radar"}})),
+        "nan": lambda i, j: (key, m.encode(meas(seq=10_000 + i, data=m.Cartesian(pos_m=[math.nan, 1.0],
+                                                                                 std_m=[1.0, 1.0])))),
+        "unknown_sensor": lambda i, j: (m.meas_key(ns, "ghost"), m.encode(meas(sensor_id="ghost", seq=i))),
+        "bad_covariance": lambda i, j: (key, m.encode(meas(seq=20_000 + i, data=m.Cartesian(
+            pos_m=[1.0, 2.0], cov_m2=[1.0, 2.0, 2.0, 1.0])))),
+        "future": lambda i, j: (key, m.encode(meas(seq=30_000 + i, t_ns=10**15))),
+        "too_late": lambda i, j: (key, m.encode(meas(seq=40_000 + i, t_ns=1))),
+        "duplicate": lambda i, j: good[j],  # the latest good message, sent again
+    }
+    bad_counts = {k: 125 for k in kinds}
+    out: list[tuple[str, bytes]] = []
+    bad_iter = [(k, i) for i in range(125) for k in kinds]
+    for j, g in enumerate(good):
+        out.append(g)
+        if j >= 100 and bad_iter:  # after the stream is under way (too_late needs a newest time)
+            for _ in range(2):
+                if bad_iter:
+                    k, i = bad_iter.pop(0)
+                    out.append(kinds[k](i, j))
+    assert not bad_iter
+    return out, bad_counts, len(good)
+
+
+def test_good_and_bad_input(tmp_path: Path) -> None:
+    _, cfg = scenario_config("mix")
+    stream, bad_counts, n_good = _good_and_bad(cfg.namespace)
+    import zenoh
+
+    with running_service(cfg, tmp_path) as (svc, endpoint):
+        s = client(endpoint)
+        try:
+            pubs = {}
+            for key, payload in stream:
+                if key not in pubs:
+                    pubs[key] = s.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK)
+                    deadline = time.monotonic() + 5
+                    while not pubs[key].matching_status.matching and time.monotonic() < deadline:
+                        time.sleep(0.001)
+                pubs[key].put(payload)
+            assert svc.wait_idle(timeout_s=60.0)
+            status = m.decode_status(query(s, m.status_key(cfg.namespace)))
+        finally:
+            s.close()
+    c = status.counts
+    assert c.applied == n_good, "a good measurement was lost"
+    assert c.duplicates == bad_counts["duplicate"]
+    refused = dict(c.refused)
+    # NaN is refused at decode as invalid; random bytes as malformed or invalid
+    assert refused.pop("malformed", 0) + refused.pop("invalid") == sum(bad_counts[k] for k in ("malformed", "invalid",
+                                                                                               "nan"))
+    assert refused == {k: v for k, v in bad_counts.items() if k not in ("duplicate", "nan", "invalid", "malformed")}
+    assert c.received == c.applied + c.duplicates + sum(c.refused.values()) + c.queued
+    assert c.received == len(stream)
+
+
+def test_status_and_snapshot(tmp_path: Path) -> None:
+    spec, cfg = scenario_config("radar2d")
+    samples, _ = build_stream(spec, namespace=cfg.namespace)
+    with running_service(cfg, tmp_path) as (svc, endpoint):
+        s = client(endpoint)
+        try:
+            publish(s, samples, speed=0.0, match_timeout_s=5.0)
+            assert svc.wait_idle(timeout_s=30.0)
+            time.sleep(0.15)  # the loop refreshes the answers every 0.1 s
+            status = m.decode_status(query(s, m.status_key(cfg.namespace)))
+            snap = m.decode_snapshot(query(s, m.snapshot_key(cfg.namespace)))
+        finally:
+            s.close()
+    c = status.counts
+    assert c.received == c.applied + c.duplicates + sum(c.refused.values()) + c.queued == 200
+    assert status.tracks == {"confirmed": 1}
+    assert status.latency["radar"].count == 200
+    assert status.recording is not None and status.recording_bytes > 0
+    assert len(snap.estimates) == 1 and snap.estimates[0].status == "confirmed"
+    assert snap.estimates[0].t_ns == 20_000_000_000
+
+
+def test_sigterm_leaves_a_complete_recording(tmp_path: Path) -> None:
+    spec, cfg = scenario_config("maneuver2d")
+    from publishers.spec import scenario_path
+
+    conf = scenario_path("maneuver2d")  # a scenario file: serve takes its [service] table
+    port = free_tcp_port()
+    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "fusion", "serve", "--config", str(conf), "--listen", f"tcp/127.0.0.1:{port}",
+         "--recordings", str(tmp_path / "rec")],
+        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, env=env, cwd=Path(__file__).resolve().parents[2],
+    )
+    try:
+        seen = []
+        for _ in range(20):
+            line = proc.stdout.readline().decode()  # type: ignore[union-attr]
+            seen.append(line)
+            if "serving" in line or not line:
+                break
+        assert "serving" in line, "".join(seen)
+        samples, _ = build_stream(spec, namespace=cfg.namespace)
+        s = client(f"tcp/127.0.0.1:{port}")
+        try:
+            publish(s, samples[: len(samples) // 2], speed=0.0, match_timeout_s=10.0)
+            time.sleep(0.5)
+        finally:
+            s.close()
+        proc.send_signal(signal.SIGTERM)
+        out, _ = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 0, out.decode()
+    files = sorted((tmp_path / "rec").glob("*.rrd"))
+    assert files, "no recording written"
+    v = subprocess.run([str(RERUN), "rrd", "verify", str(files[0])], capture_output=True, text=True, timeout=60)
+    assert v.returncode == 0, v.stderr
+    from fusion.io.inspect import summarise
+
+    summary = summarise(files[0])
+    assert summary.complete and summary.counts["applied"] > 0
+
+
+def test_demo_runs(tmp_path: Path) -> None:
+    from publishers.demo import demo_report, run_demo
+
+    r = run_demo(scenario="mix", duration_s=5.0, out=tmp_path / "demo.rrd", speed=0.0)
+    assert r.recording.exists() and r.stream.exists()
+    assert len(r.summary.tracks) >= 4
+    assert r.summary.position_rmse is not None and r.summary.position_rmse < 10.0
+    assert "rerun " in demo_report(r)
