@@ -108,9 +108,12 @@ def _chunks(path: Path) -> tuple[list[object], int]:
 
 
 def _scalars(batch: object) -> tuple[np.ndarray, np.ndarray]:
+    """(t, values (rows, k)) of a Scalars chunk; k components per row."""
     b = batch  # pyarrow RecordBatch
     t = b.column("t").cast("int64").to_numpy()  # type: ignore[attr-defined]
-    v = np.array([x[0] if x else np.nan for x in b.column("Scalars:scalars").to_pylist()])  # type: ignore[attr-defined]
+    rows = b.column("Scalars:scalars").to_pylist()  # type: ignore[attr-defined]
+    k = max((len(r) for r in rows if r), default=1)
+    v = np.array([r if r and len(r) == k else [np.nan] * k for r in rows], dtype=np.float64).reshape(len(rows), k)
     return t, v
 
 
@@ -127,6 +130,7 @@ def summarise(path: str | Path) -> Summary:
     track_rows: dict[str, list[np.ndarray]] = defaultdict(list)
     events: dict[str, int] = defaultdict(int)
     confirmed_ids: set[str] = set()
+    tentative_rows: set[str] = set()
     meta: dict[str, object] = {}
     t_all: list[int] = []
     for ch in chunks:
@@ -140,7 +144,10 @@ def summarise(path: str | Path) -> Summary:
         if "t" in names and b.num_rows:
             t = b.column("t").cast("int64").to_numpy()
             t_all.extend((int(t.min()), int(t.max())))
-        if parts[:2] == ["world", "meas"] and len(parts) == 3:
+        if ent == "/world/tentative":
+            tentative_rows.update(x[0] for x in b.column("Points2D:labels" if "Points2D:labels" in names
+                                                         else "Points3D:labels").to_pylist() if x)
+        elif parts[:2] == ["world", "meas"] and len(parts) == 3:
             sensors[parts[2]] += sum(len(x) for x in b.column("Points2D:positions" if "Points2D:positions" in names
                                                               else "Points3D:positions").to_pylist())
         elif parts[:2] == ["world", "tracks"] and len(parts) == 3:
@@ -157,16 +164,17 @@ def summarise(path: str | Path) -> Summary:
                     confirmed_ids.add(m.group(1))
 
     def joined(name: str) -> tuple[np.ndarray, np.ndarray]:
+        """(t, values (rows, k)) of a series, in time order."""
         parts_ = series.get(name, [])
         if not parts_:
-            return np.empty(0, dtype=np.int64), np.empty(0)
+            return np.empty(0, dtype=np.int64), np.empty((0, 1))
         t = np.concatenate([a for a, _ in parts_])
         v = np.concatenate([b for _, b in parts_])
         o = np.argsort(t, kind="stable")
         return t[o], v[o]
 
     layout = [str(x) for x in meta.get("layout", [])]  # type: ignore[union-attr]
-    pos_names = [layout[i] for i in meta.get("position_indices", [])] if layout else []  # type: ignore[union-attr]
+    pos_idx = [int(i) for i in meta.get("position_indices", [])]  # type: ignore[union-attr]
     n_state = len(layout)
     tracks: list[TrackSummary] = []
     all_sq: list[np.ndarray] = []
@@ -176,13 +184,13 @@ def summarise(path: str | Path) -> Summary:
     for tid in sorted(confirmed_ids & set(track_rows), key=lambda s: int(s) if s.isdigit() else s):
         ts = np.concatenate(track_rows[tid])
         sq = None
-        errs = [joined(f"tracks/{tid}/error/{n}")[1] for n in pos_names]
-        if errs and all(e.size for e in errs) and len({e.size for e in errs}) == 1:
-            sq = np.sum(np.stack(errs) ** 2, axis=0)
+        _, err = joined(f"tracks/{tid}/error")
+        if err.shape[0] and pos_idx and err.shape[1] == n_state:
+            sq = np.sum(err[:, pos_idx] ** 2, axis=1)
             all_sq.append(sq)
-        _, nis = joined(f"tracks/{tid}/nis")
-        _, dof = joined(f"tracks/{tid}/nis_dof")
-        _, nees = joined(f"tracks/{tid}/nees")
+        nis = joined(f"tracks/{tid}/nis")[1][:, 0]
+        dof = joined(f"tracks/{tid}/nis_dof")[1][:, 0]
+        nees = joined(f"tracks/{tid}/nees")[1][:, 0]
         nis_v.extend(nis.tolist())
         nis_d.extend(dof.astype(int).tolist() if dof.size == nis.size else [2] * nis.size)
         nees_v.extend(nees.tolist())
@@ -195,14 +203,14 @@ def summarise(path: str | Path) -> Summary:
     for name in sorted(series):
         if name.startswith("counts/"):
             t, v = joined(name)
-            counts[name[len("counts/"):]] = int(v[-1])
+            counts[name[len("counts/"):]] = int(v[-1, 0])
     t0 = min(t_all) if t_all else None
     t1 = max(t_all) if t_all else None
     allsq = np.concatenate(all_sq) if all_sq else np.empty(0)
     return Summary(
         path=str(p), size_bytes=size, complete=complete, dropped_bytes=dropped, t_first_ns=t0, t_last_ns=t1,
         duration_s=0.0 if t0 is None or t1 is None else (t1 - t0) / 1e9,
-        sensors=dict(sorted(sensors.items())), tracks=tracks, tentative_only=len(set(track_rows) - confirmed_ids),
+        sensors=dict(sorted(sensors.items())), tracks=tracks, tentative_only=len(tentative_rows - confirmed_ids),
         position_rmse=float(np.sqrt(allsq.mean())) if allsq.size else None,
         nis=_verdict(nis_v, nis_d), nees=_verdict(nees_v, [n_state] * len(nees_v)), counts=counts,
         events=dict(sorted(events.items())), meta=meta,

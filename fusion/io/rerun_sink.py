@@ -1,23 +1,27 @@
 """Every tracker step into a Rerun .rrd file, written in columns.
 
-Per-call `log` costs 50-150 us here, so rows are buffered per entity in plain lists and written
-with `send_columns` when `flush_rows` rows are pending or `flush_interval_s` has passed (checked
-on each call), and at `close()`. Nothing the tracker did is dropped.
+Per-call `log` costs 50-150 us here and so does each `send_columns` call, whatever its size, so
+rows are buffered per entity in plain lists and written with one `send_columns` per entity when
+`flush_rows` rows are pending or `flush_interval_s` has passed (checked on each call), and at
+`close()`; and the layout keeps the number of entities small (one multi-valued Scalars entity per
+quantity, one shared entity for all tentative tracks). Nothing the tracker did is dropped.
 
-Entity layout (all positions in metres, world frame; 3-D tracks use the 3-D archetypes):
+Entity layout (all positions in metres, world frame; 1-D tracks on the x axis of a 2-D view,
+3-D tracks with the 3-D archetypes):
   world/meas/<sensor_id>             measured points (radar returns converted to Cartesian)
-  world/tracks/<track_id>            estimated position (Points), colour by status
+  world/tentative                    every estimate of a tentative track (labelled with its id)
+  world/tracks/<track_id>            estimated position of a confirmed track (Points)
   world/tracks/<track_id>/cov        2-sigma covariance ellipse (LineStrips2D) or ellipsoid (Ellipsoids3D)
   world/tracks/<track_id>/vel        velocity (Arrows)
-  world/tracks/<track_id>/meas       the measurement that updated (or started) it: the association
+  world/tracks/<track_id>/meas       the measurement that updated it: the association
   world/truth/<target_id>            true position
-  tracks/<track_id>/state/<name>     every state component (Scalars)
-  tracks/<track_id>/std/<name>       sqrt(diag(P))
-  tracks/<track_id>/truth/<name>     truth of the nearest true target at the same time, if within MATCH_D2
-  tracks/<track_id>/error/<name>     estimate - truth
+  tracks/<track_id>/state            every state component (Scalars, one series per component)
+  tracks/<track_id>/std              sqrt(diag(P))
+  tracks/<track_id>/truth            truth of the nearest true target at the same time, if within MATCH_D2
+  tracks/<track_id>/error            estimate - truth
   tracks/<track_id>/nis              NIS of the update (degrees of freedom in tracks/<track_id>/nis_dof)
   tracks/<track_id>/nees             NEES against the matched truth
-  tracks/<track_id>/mode/<k>         IMM model probabilities
+  tracks/<track_id>/mode             IMM model probabilities
   events                             births, confirmations, deletions, retractions, replays, refusals (TextLog)
   counts/<name>                      the tracker's cumulative counters (received, applied, refused_<reason>, ...)
   meta                               static JSON: layout, position indices, sensors (TextDocument)
@@ -45,16 +49,22 @@ _CIRCLE = np.stack([np.cos(np.linspace(0, 2 * np.pi, 33)), np.sin(np.linspace(0,
 
 
 def ellipse_points(mean: Array, cov: Array, *, n_sigma: float = 2.0) -> Array:
-    """Points of the n-sigma ellipse of a 2-D Gaussian: mean + n L u for u on the unit circle."""
-    w, V = np.linalg.eigh(0.5 * (cov + cov.T))
-    L = V * np.sqrt(np.clip(w, 0.0, None))
-    return mean + n_sigma * _CIRCLE @ L.T
+    """Points of the n-sigma ellipse of 2-D Gaussians: mean + n L u for u on the unit circle,
+    L L' = cov. mean (..., 2), cov (..., 2, 2) -> (..., 33, 2)."""
+    w, V = np.linalg.eigh(0.5 * (cov + np.swapaxes(cov, -1, -2)))
+    L = V * np.sqrt(np.clip(w, 0.0, None))[..., None, :]
+    return mean[..., None, :] + n_sigma * _CIRCLE @ np.swapaxes(L, -1, -2)
 
 
 class _Column:
     """Pending rows of one entity: times and the archetype's fields."""
 
     __slots__ = ("arrival_ns", "data", "kind", "step", "t_ns")
+
+    def add(self, t_ns: int, step: int, arrival_ns: int) -> None:
+        self.t_ns.append(t_ns)
+        self.step.append(step)
+        self.arrival_ns.append(arrival_ns)
 
     def __init__(self, kind: str) -> None:
         self.kind = kind
@@ -93,6 +103,8 @@ class RerunSink:
         self._step = 0
         self._truth: dict[int, dict[str, Array]] = defaultdict(dict)  # t_ns -> target -> state (layout order)
         self._closed = False
+        self._named: set[str] = set()
+        self._est: list[tuple[Estimate, int, int]] = []
         self._counts = counts
         self._newest_t = 0
         self._send_blueprint()
@@ -116,6 +128,7 @@ class RerunSink:
 
     def _scalar(self, entity: str, t_ns: int, value: float, arrival_ns: int | None = None) -> None:
         self._row(entity, "scalar", t_ns, arrival_ns, v=float(value))
+
 
     def _world(self, p: Array) -> Array:
         """A point (or points) for the world view: 1-D positions go on the x axis."""
@@ -161,53 +174,127 @@ class RerunSink:
         self.maybe_flush()
 
     def _estimate(self, e: Estimate, arrival_ns: int | None) -> None:
-        base = f"tracks/{e.track_id}"
+        """Hot path: keep the estimate; everything derived from it is computed at flush time,
+        vectorised over each track's rows."""
         if e.status == "retracted":
             self.log_text(e.t_ns, f"track {e.track_id} retracted its estimate from {e.sensor_id} (rev {e.revision})")
             return
-        t = e.t_ns
-        x, P = e.x, e.P
-        pos = self._world(x[self.pi])
-        self._row(f"world/{base}", "track", t, arrival_ns, p=pos, status=e.status)
-        Pp = P[np.ix_(self.pi, self.pi)]
-        if self.ndim == 1:
-            half = 2.0 * np.sqrt(Pp[0, 0])
-            self._row(f"world/{base}/cov", "strip", t, arrival_ns, s=pos + np.array([[-half, 0.0], [half, 0.0]]))
-        elif self.ndim == 2:
-            self._row(f"world/{base}/cov", "strip", t, arrival_ns, s=ellipse_points(pos, Pp))
-        else:
-            self._row(f"world/{base}/cov", "ellipsoid", t, arrival_ns, c=pos, cov=Pp)
-        if self.vi:
-            self._row(f"world/{base}/vel", "arrow", t, arrival_ns, o=pos, v=self._world(x[self.vi]))
-        if e.meas_pos is not None:
-            self._row(f"world/{base}/meas", "points", t, arrival_ns, p=self._world(e.meas_pos)[None, :])
-        std = np.sqrt(np.clip(np.diagonal(P), 0.0, None))
-        for name, xv, sv in zip(self.layout, x, std, strict=True):
-            self._scalar(f"{base}/state/{name}", t, xv, arrival_ns)
-            self._scalar(f"{base}/std/{name}", t, sv, arrival_ns)
-        if e.nis is not None and e.y is not None:
-            self._scalar(f"{base}/nis", t, e.nis, arrival_ns)
-            self._scalar(f"{base}/nis_dof", t, e.y.shape[0], arrival_ns)
-        if e.mode_probabilities is not None:
-            for k, p in enumerate(e.mode_probabilities):
-                self._scalar(f"{base}/mode/{k}", t, p, arrival_ns)
-        truth = self._truth.get(t)
-        if truth:
-            names = sorted(truth)
-            T = np.stack([truth[n] for n in names])
-            dp = T[:, self.pi] - x[self.pi]
-            d2 = np.einsum("ij,ij->i", dp, np.linalg.solve(Pp, dp.T).T)
-            k = int(np.argmin(d2))
-            tx = T[k]
-            # Score against the nearest true target, and only when it is plausibly this track's
-            # (d2 < MATCH_D2): a truth sample that has not arrived yet must not pair the track
-            # with another target.
-            if tx.shape == x.shape and d2[k] < MATCH_D2:
-                err = x - tx
-                for name, tv, ev in zip(self.layout, tx, err, strict=True):
-                    self._scalar(f"{base}/truth/{name}", t, tv, arrival_ns)
-                    self._scalar(f"{base}/error/{name}", t, ev, arrival_ns)
-                self._scalar(f"{base}/nees", t, float(err @ np.linalg.solve(P, err)), arrival_ns)
+        self._est.append((e, e.t_ns if arrival_ns is None else arrival_ns, self._step))
+        self._pending += 1
+        if e.t_ns > self._newest_t:
+            self._newest_t = e.t_ns
+
+    def _derive(self) -> None:
+        """Turn the kept estimates into rows, per track, with stacked numpy operations."""
+        est, self._est = self._est, []
+        if not est:
+            return
+        by_track: dict[int, list[tuple[Estimate, int, int]]] = defaultdict(list)
+        tentative: list[tuple[Estimate, int, int]] = []
+        for item in est:
+            (tentative if item[0].status == "tentative" else by_track[item[0].track_id]).append(item)
+        if tentative:
+            c = self._col("world/tentative", "tentative")
+            for e, arr, step in tentative:
+                c.add(e.t_ns, step, arr)
+                c.data["p"].append(self._world(e.x[self.pi]))
+                c.data["label"].append(str(e.track_id))
+        names = self.layout
+        for tid in sorted(by_track):
+            rows = by_track[tid]
+            base = f"tracks/{tid}"
+            t = np.array([r[0].t_ns for r in rows], dtype=np.int64)
+            arr = np.array([r[1] for r in rows], dtype=np.int64)
+            step = np.array([r[2] for r in rows], dtype=np.int64)
+            X = np.stack([r[0].x for r in rows])
+            P = np.stack([r[0].P for r in rows])
+            pos = X[:, self.pi]
+            Pp = P[:, self.pi][:, :, self.pi]
+            wpos = self._world(pos)
+            self._cols_add(f"world/{base}", "track", t, step, arr, p=list(wpos), status=[r[0].status for r in rows])
+            if self.ndim == 1:
+                half = 2.0 * np.sqrt(Pp[:, 0, 0])
+                seg = np.stack([wpos - np.column_stack([half, 0 * half]), wpos + np.column_stack([half, 0 * half])], 1)
+                self._cols_add(f"world/{base}/cov", "strip", t, step, arr, s=list(seg))
+            elif self.ndim == 2:
+                self._cols_add(f"world/{base}/cov", "strip", t, step, arr, s=list(ellipse_points(pos, Pp)))
+            else:
+                self._cols_add(f"world/{base}/cov", "ellipsoid", t, step, arr, c=list(pos), cov=list(Pp))
+            if self.vi:
+                vel = self._world(X[:, self.vi])
+                self._cols_add(f"world/{base}/vel", "arrow", t, step, arr, o=list(wpos), v=list(vel))
+            mp = [r[0].meas_pos for r in rows]
+            if all(p is not None for p in mp):
+                self._cols_add(f"world/{base}/meas", "points", t, step, arr,
+                               p=[self._world(p)[None, :] for p in mp])  # type: ignore[arg-type]
+            self._name(f"{base}/state", names)
+            self._cols_add(f"{base}/state", "vector", t, step, arr, v=list(X))
+            self._name(f"{base}/std", names)
+            self._cols_add(f"{base}/std", "vector", t, step, arr,
+                           v=list(np.sqrt(np.clip(np.diagonal(P, axis1=1, axis2=2), 0.0, None))))
+            upd = [i for i, r in enumerate(rows) if r[0].nis is not None and r[0].y is not None]
+            if upd:
+                sel = np.array(upd)
+                self._cols_add(f"{base}/nis", "scalar", t[sel], step[sel], arr[sel], v=[rows[i][0].nis for i in upd])
+                self._cols_add(f"{base}/nis_dof", "scalar", t[sel], step[sel], arr[sel],
+                               v=[float(rows[i][0].y.shape[0]) for i in upd])  # type: ignore[union-attr]
+            if rows[0][0].mode_probabilities is not None:
+                mu = np.stack([r[0].mode_probabilities for r in rows])
+                self._name(f"{base}/mode", tuple(f"model {k}" for k in range(mu.shape[1])))
+                self._cols_add(f"{base}/mode", "vector", t, step, arr, v=list(mu))
+            self._score(base, rows, t, step, arr, X, P, Pp)
+
+    def _score(self, base: str, rows: list, t: Array, step: Array, arr: Array, X: Array, P: Array, Pp: Array) -> None:
+        """Truth, error and NEES rows against the nearest true target at the same time, when it
+        lies within MATCH_D2 (a truth sample that has not arrived yet must not pair a track with
+        another target)."""
+        idx, truths = [], []
+        for i, tt in enumerate(t.tolist()):
+            T = self._truth.get(tt)
+            if not T:
+                continue
+            cand = np.stack([T[k] for k in sorted(T)])
+            if cand.shape[1] != X.shape[1]:
+                continue
+            k = int(np.argmin(np.sum((cand[:, self.pi] - X[i, self.pi]) ** 2, axis=1)))
+            idx.append(i)
+            truths.append(cand[k])
+        if not idx:
+            return
+        sel = np.array(idx)
+        TX = np.stack(truths)
+        E = X[sel] - TX
+        dp = E[:, self.pi]
+        d2 = np.einsum("ij,ij->i", dp, np.linalg.solve(Pp[sel], dp[..., None])[..., 0])
+        ok = d2 < MATCH_D2
+        if not ok.any():
+            return
+        sel, TX, E = sel[ok], TX[ok], E[ok]
+        nees = np.einsum("ij,ij->i", E, np.linalg.solve(P[sel], E[..., None])[..., 0])
+        self._name(f"{base}/truth", self.layout)
+        self._name(f"{base}/error", self.layout)
+        self._cols_add(f"{base}/truth", "vector", t[sel], step[sel], arr[sel], v=list(TX))
+        self._cols_add(f"{base}/error", "vector", t[sel], step[sel], arr[sel], v=list(E))
+        self._cols_add(f"{base}/nees", "scalar", t[sel], step[sel], arr[sel], v=nees.tolist())
+
+    def _name(self, entity: str, names: tuple[str, ...]) -> None:
+        if entity not in self._named:
+            self._named.add(entity)
+            self.rec.log(entity, self._rr.SeriesLines(names=list(names)), static=True)
+
+    def _col(self, entity: str, kind: str) -> _Column:
+        c = self._cols.get(entity)
+        if c is None:
+            c = self._cols[entity] = _Column(kind)
+        return c
+
+    def _cols_add(self, entity: str, kind: str, t: Array, step: Array, arr: Array, **fields: list) -> None:
+        c = self._col(entity, kind)
+        c.t_ns.extend(t.tolist())
+        c.step.extend(step.tolist())
+        c.arrival_ns.extend(arr.tolist())
+        for k, v in fields.items():
+            c.data[k].extend(v)
 
     # ---- writing -------------------------------------------------------------------------------
     def maybe_flush(self) -> None:
@@ -217,6 +304,7 @@ class RerunSink:
     def flush(self) -> None:
         """Write every pending row as columns (and the tracker's counters, when given)."""
         rr = self._rr
+        self._derive()
         if self._counts is not None and self._pending:
             for name, v in sorted(self._counts().items()):
                 self._scalar(f"counts/{name}", self._newest_t, v)
@@ -232,6 +320,13 @@ class RerunSink:
             d = c.data
             if c.kind == "scalar":
                 columns = rr.Scalars.columns(scalars=np.array(d["v"]))
+            elif c.kind == "vector":
+                columns = rr.Scalars.columns(scalars=np.concatenate(d["v"])).partition([len(v) for v in d["v"]])
+            elif c.kind == "tentative":
+                pts = np.stack(d["p"])
+                arch = rr.Points2D if pts.shape[1] == 2 else rr.Points3D
+                columns = arch.columns(positions=pts, labels=d["label"],
+                                       colors=np.tile(np.array(_COLOURS["tentative"], dtype=np.uint8), (n, 1)))
             elif c.kind == "text":
                 columns = rr.TextLog.columns(text=d["text"], level=d["level"])
             elif c.kind == "points":
@@ -292,12 +387,12 @@ class RerunSink:
             rrb.Horizontal(
                 rrb.Vertical(world, rrb.TextLogView(origin="events", name="Events"), row_shares=[3, 1]),
                 rrb.Vertical(
-                    rrb.TimeSeriesView(origin="tracks", contents="$origin/*/state/**", name="State"),
-                    rrb.TimeSeriesView(origin="tracks", contents="$origin/*/std/**", name="Standard deviations"),
+                    rrb.TimeSeriesView(origin="tracks", contents="$origin/*/state", name="State"),
+                    rrb.TimeSeriesView(origin="tracks", contents="$origin/*/std", name="Standard deviations"),
                     rrb.TimeSeriesView(
                         origin="tracks", contents=["$origin/*/nis", "$origin/*/nees"], name="NIS / NEES"
                     ),
-                    rrb.TimeSeriesView(origin="tracks", contents="$origin/*/error/**", name="Error vs truth"),
+                    rrb.TimeSeriesView(origin="tracks", contents="$origin/*/error", name="Error vs truth"),
                 ),
                 column_shares=[3, 2],
             ),
