@@ -139,3 +139,21 @@ def test_ellipse_is_two_sigma() -> None:
     d = pts - np.array([1.0, -1.0])
     m = np.einsum("ij,ij->i", d, np.linalg.solve(cov, d.T).T)
     np.testing.assert_allclose(m, 4.0, rtol=1e-12)
+
+
+def test_inspect_cli_json(tmp_path: Path) -> None:
+    import sys
+
+    path = tmp_path / "run.rrd"
+    _record(path)
+    out = subprocess.run([sys.executable, "-m", "fusion", "inspect", str(path), "--json"], capture_output=True,
+                         text=True, timeout=120, cwd=Path(__file__).resolve().parents[2])
+    assert out.returncode == 0, out.stderr
+    data = json.loads(out.stdout)
+    s = summarise(path)
+    assert data["position_rmse"] == pytest.approx(s.position_rmse, rel=1e-12)
+    assert data["nees"]["mean"] == pytest.approx(s.nees.mean, rel=1e-12)
+    assert [t["track_id"] for t in data["tracks"]] == [t.track_id for t in s.tracks]
+    text = subprocess.run([sys.executable, "-m", "fusion", "inspect", str(path)], capture_output=True, text=True,
+                          timeout=120, cwd=Path(__file__).resolve().parents[2])
+    assert "position RMSE against truth" in text.stdout and "complete" in text.stdout
