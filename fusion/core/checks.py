@@ -16,10 +16,11 @@ Array = NDArray[np.float64]
 def as_vector(name: str, v: ArrayLike, n: int | None = None) -> Array:
     """A finite float64 vector of length n (any length if n is None)."""
     a = np.asarray(v, dtype=np.float64)
-    if a.ndim == 0:
-        a = a.reshape(1)
     if a.ndim != 1:
-        raise ShapeError(f"{name} must be a vector, got shape {a.shape}")
+        if a.ndim == 0:
+            a = a.reshape(1)
+        else:
+            raise ShapeError(f"{name} must be a vector, got shape {a.shape}")
     if n is not None and a.shape[0] != n:
         raise ShapeError(f"{name} must have length {n}, got {a.shape[0]}")
     if not np.isfinite(a).all():

@@ -1,0 +1,75 @@
+"""`python -m bench [--quick] [--only core,tracker,recording]`: every benchmark, one command.
+
+Each benchmark measures its baselines in the same run, interleaved, and prints ratios. The
+machine's state (other processes) moves absolute figures; the ratios are the comparison.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import sys
+import time
+from pathlib import Path
+
+
+def machine() -> dict[str, str]:
+    import numpy as np
+
+    cpu = "unknown"
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    info = {"python": platform.python_version(), "numpy": np.__version__, "cpu": cpu, "cores": str(os.cpu_count())}
+    try:
+        from threadpoolctl import threadpool_info
+
+        info["blas"] = ", ".join(f"{d.get('internal_api')} {d.get('architecture', '')}".strip()
+                                 for d in threadpool_info())
+    except ImportError:
+        pass
+    return info
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(prog="python -m bench")
+    p.add_argument("--quick", action="store_true", help="fewer repeats and sizes (~1 minute)")
+    p.add_argument("--only", default="core,tracker,recording", help="comma-separated: core, tracker, recording")
+    p.add_argument("--json", type=Path, help="also write the figures to this file")
+    args = p.parse_args(argv)
+    os.environ.setdefault("XDG_CONFIG_HOME", "/tmp/fusion-bench-xdg")
+    os.environ.setdefault("XDG_DATA_HOME", "/tmp/fusion-bench-xdg")
+    print("machine:", ", ".join(f"{k} {v}" for k, v in machine().items()))
+    results: dict[str, object] = {"machine": machine(), "date": time.strftime("%Y-%m-%d")}
+    for name in args.only.split(","):
+        print()
+        t0 = time.perf_counter()
+        if name == "core":
+            from bench import core_step
+
+            results["core"] = core_step.run(quick=args.quick)
+        elif name == "tracker":
+            from bench import tracker_scan
+
+            results["tracker"] = tracker_scan.run(quick=args.quick)
+        elif name == "recording":
+            from bench import recording_cost
+
+            results["recording"] = recording_cost.run(quick=args.quick)
+        else:
+            print(f"unknown benchmark {name!r}", file=sys.stderr)
+            return 2
+        print(f"({name}: {time.perf_counter() - t0:.0f} s)")
+    if args.json:
+        args.json.write_text(json.dumps(results, indent=2, default=str))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
