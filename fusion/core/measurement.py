@@ -25,8 +25,13 @@ TWO_PI = 2.0 * np.pi
 
 
 def wrap_angle(a: ArrayLike) -> Array:
-    """Wrap angles into (-pi, pi]: wrap(a) = pi - ((pi - a) mod 2 pi)."""
-    return np.pi - np.mod(np.pi - np.asarray(a, dtype=np.float64), TWO_PI)
+    """Wrap angles into (-pi, pi]: wrap(a) = pi - ((pi - a) mod 2 pi).
+
+    When pi - a is a tiny negative number the float mod rounds up to exactly 2 pi, giving -pi;
+    that one value is mapped to +pi.
+    """
+    w = np.pi - np.mod(np.pi - np.asarray(a, dtype=np.float64), TWO_PI)
+    return np.where(w <= -np.pi, w + TWO_PI, w)
 
 
 class MeasurementModel(ABC):

@@ -220,7 +220,7 @@ class CoordinatedTurn(MotionModel):
         small = np.abs(wt) < 1e-6
         w_safe = np.where(small, 1.0, w)
         sw = np.where(small, dt * (1 - wt**2 / 6), s / w_safe)
-        cw = np.where(small, dt * (wt / 2 - wt**3 / 24), (1 - c) / w_safe)
+        cw = np.where(small, dt * (wt / 2 - wt**3 / 24), 2.0 * np.sin(0.5 * wt) ** 2 / w_safe)
         return sw, cw, c, s
 
     def f(self, x: Array, dt_s: float | Array) -> Array:
