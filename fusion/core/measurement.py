@@ -70,6 +70,11 @@ class MeasurementModel(ABC):
         """The measured point in world Cartesian coordinates (for initiation and plots)."""
 
 
+def _heading(h: float) -> float:
+    """A finite sensor heading in radians (NaN would turn every later update into NaN)."""
+    return float(as_vector("heading_rad", [h], 1)[0])
+
+
 def _noise(R: ArrayLike, m: int) -> Array:
     R = np.asarray(R, dtype=np.float64)
     if R.ndim == 1:
@@ -124,7 +129,7 @@ class Radar2D(MeasurementModel):
         ndim_state: int = 4,
     ) -> None:
         self.sensor = as_vector("position", position, 2)
-        self.heading_rad = float(heading_rad)
+        self.heading_rad = _heading(heading_rad)
         self.pos_idx, self.vel_idx = tuple(pos_idx), tuple(vel_idx)
         self.range_rate = range_rate
         self.ndim_state = ndim_state
@@ -188,7 +193,7 @@ class Radar3D(MeasurementModel):
         ndim_state: int = 6,
     ) -> None:
         self.sensor = as_vector("position", position, 3)
-        self.heading_rad = float(heading_rad)
+        self.heading_rad = _heading(heading_rad)
         self.pos_idx, self.vel_idx = tuple(pos_idx), tuple(vel_idx)
         self.range_rate = range_rate
         self.ndim_state = ndim_state

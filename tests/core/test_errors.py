@@ -163,9 +163,6 @@ def test_model_constructor_refuses(case: str) -> None:
     assert isinstance(info.value, FusionError)
 
 
-@pytest.mark.xfail(strict=True, raises=AssertionError,
-                   reason="Radar2D/Radar3D do not validate heading_rad; a NaN heading is accepted "
-                          "and turns every later update into NaN without an error")
 @pytest.mark.parametrize("cls", [Radar2D, Radar3D], ids=["radar2d", "radar3d"])
 def test_radar_heading_must_be_finite(cls) -> None:
     R = [1.0, 1.0] if cls is Radar2D else [1.0, 1.0, 1.0]
