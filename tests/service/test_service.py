@@ -79,6 +79,30 @@ def test_reference_scenario_end_to_end(name: str, tmp_path: Path) -> None:
     assert all(e.status != "tentative" for e in got), "a tentative track was published"
     confirmed = {e.track_id for e in got if e.status == "confirmed"}
     assert len(confirmed) == 1, f"one target, {len(confirmed)} confirmed tracks"
+    # the service's recording holds every estimate it published, with covariance, NIS and truth
+    rows = _rrd_rows(tmp_path / "live.rrd")
+    (tid,) = confirmed
+    n = sum(1 for e in got if e.track_id == tid and e.status == "confirmed")
+    for entity in (f"/world/tracks/{tid}", f"/world/tracks/{tid}/cov", f"/tracks/{tid}/state", f"/tracks/{tid}/std"):
+        assert rows[entity] == n, entity
+    assert rows[f"/tracks/{tid}/nis"] == sum(1 for e in got if e.track_id == tid and e.nis is not None)
+    assert rows[f"/tracks/{tid}/nees"] > 0.9 * n, "estimates were not scored against the truth"
+    assert rows["/events"] > 0
+    v = subprocess.run([str(RERUN), "rrd", "verify", str(tmp_path / "live.rrd")], capture_output=True, text=True,
+                       timeout=60)
+    assert v.returncode == 0, v.stderr
+
+
+def _rrd_rows(path: Path) -> dict[str, int]:
+    from collections import Counter
+
+    from rerun.chunk import RrdReader
+
+    rows: Counter[str] = Counter()
+    for ch in RrdReader(str(path)).stream():
+        if not ch.is_static:
+            rows[ch.entity_path] += ch.to_record_batch().num_rows
+    return rows
 
 
 def test_replay_equals_live_and_is_deterministic(tmp_path: Path) -> None:
