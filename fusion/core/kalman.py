@@ -106,8 +106,8 @@ def update_single(x: Array, P: Array, y: Array, H: Array, R: Array) -> tuple[Arr
     return x + K @ y, Pn, S, nis, -0.5 * (nis + logdet + m * LOG_2PI)
 
 
-class ExtendedKalmanFilter:
-    """EKF over any motion model and any measurement model (exact KF when both are linear).
+class FilterBase:
+    """What every single-state filter shares: its motion model, input checks, initial state.
 
     Stateless: predict and update take a GaussianState and return new objects. With
     check=True (the default) inputs are validated: shapes, finiteness, R positive definite.
@@ -128,6 +128,31 @@ class ExtendedKalmanFilter:
             raise ShapeError(f"initial x has {st.ndim} components, the model has {self.ndim_state}")
         return st
 
+    def _measurement(self, z: ArrayLike, R: ArrayLike | None, model: MeasurementModel) -> tuple[Array, Array]:
+        """z and R as arrays (R defaults to the model's), validated when check is on."""
+        if self.check:
+            return as_vector("z", z, model.ndim_meas), (
+                model.R if R is None else as_covariance("R", R, model.ndim_meas))
+        zv = z if isinstance(z, np.ndarray) else np.asarray(z, dtype=np.float64)
+        return zv, model.R if R is None else np.asarray(R, dtype=np.float64)
+
+    def _control(self, x: Array, dt: float, u: ArrayLike | None) -> Array:
+        """x + B(dt) u, refused for a model that takes no input."""
+        if u is None:
+            return x
+        B = self.motion.control(dt)
+        if B is None:
+            raise ConfigError(f"{type(self.motion).__name__} takes no control input")
+        return x + B @ as_vector("u", u, B.shape[1])
+
+    def _finite(self, x: Array) -> None:
+        if self.check and not np.isfinite(x).all():
+            raise NumericalError(f"prediction produced a non-finite state: {x}")
+
+
+class ExtendedKalmanFilter(FilterBase):
+    """EKF over any motion model and any measurement model (exact KF when both are linear)."""
+
     def predict(self, state: GaussianState, t_ns: int, *, u: ArrayLike | None = None) -> GaussianState:
         """Predict to t_ns (>= state.t_ns); u is the control input if the model takes one."""
         dt = dt_seconds(state.t_ns, t_ns)
@@ -136,25 +161,15 @@ class ExtendedKalmanFilter:
         x = F @ state.x if m.is_linear else m.f(state.x, dt)
         P = F @ state.P @ F.T
         P += m.Q(state.x, dt)  # symmetrised by the update (and exactly symmetric up to rounding)
-        if u is not None:
-            B = m.control(dt)
-            if B is None:
-                raise ConfigError(f"{type(m).__name__} takes no control input")
-            x = x + B @ as_vector("u", u, B.shape[1])
-        if self.check and not np.isfinite(x).all():
-            raise NumericalError(f"prediction produced a non-finite state: {x}")
+        x = self._control(x, dt, u)
+        self._finite(x)
         return GaussianState(x, P, int(t_ns))
 
     def update(
         self, state: GaussianState, z: ArrayLike, model: MeasurementModel, *, R: ArrayLike | None = None
     ) -> Update:
         """Fold z (taken at state.t_ns) in; R defaults to the model's."""
-        if self.check:
-            zv = as_vector("z", z, model.ndim_meas)
-            Rm = model.R if R is None else as_covariance("R", R, model.ndim_meas)
-        else:
-            zv = z if isinstance(z, np.ndarray) else np.asarray(z, dtype=np.float64)
-            Rm = model.R if R is None else np.asarray(R, dtype=np.float64)
+        zv, Rm = self._measurement(z, R, model)
         x = state.x
         y = model.residual(zv, model.h(x))
         xn, Pn, S, nis, ll = update_single(x, state.P, y, model.jacobian(x), Rm)

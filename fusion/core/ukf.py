@@ -17,13 +17,13 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
-from fusion.core.checks import Array, as_covariance, as_vector
+from fusion.core.checks import Array
 from fusion.core.gaussian import GaussianState, Update
-from fusion.core.kalman import LOG_2PI
+from fusion.core.kalman import LOG_2PI, FilterBase
 from fusion.core.measurement import MeasurementModel
 from fusion.core.motion import MotionModel
 from fusion.core.timebase import dt_seconds
-from fusion.errors import ConfigError, NumericalError, ShapeError
+from fusion.errors import ConfigError, NumericalError
 
 
 @dataclass(frozen=True, slots=True)
@@ -54,7 +54,7 @@ def _chol(P: Array, what: str) -> Array:
         raise NumericalError(f"{what} is not positive definite") from None
 
 
-class UnscentedKalmanFilter:
+class UnscentedKalmanFilter(FilterBase):
     """UKF over any motion and measurement model. `state_residual` and `state_mean` default to
     plain subtraction and the weighted sum; give them for states that hold angles."""
 
@@ -67,23 +67,11 @@ class UnscentedKalmanFilter:
         state_mean: Callable[[Array, Array], Array] | None = None,
         check: bool = True,
     ) -> None:
-        self.motion = motion
+        super().__init__(motion, check=check)
         self.points = points or SigmaPoints()
         self._c, self.Wm, self.Wc = self.points.weights(motion.ndim_state)
         self.state_residual = state_residual or (lambda a, b: a - b)
         self.state_mean = state_mean or (lambda X, w: w @ X)
-        self.check = check
-
-    @property
-    def ndim_state(self) -> int:
-        return self.motion.ndim_state
-
-    def initial(self, x: ArrayLike, P: ArrayLike, *, t_ns: int) -> GaussianState:
-        """A validated initial state for this filter."""
-        st = GaussianState.create(x, P, t_ns=t_ns)
-        if st.ndim != self.ndim_state:
-            raise ShapeError(f"initial x has {st.ndim} components, the model has {self.ndim_state}")
-        return st
 
     def sigma_points(self, x: Array, P: Array) -> Array:
         """The 2n + 1 sigma points as rows."""
@@ -97,24 +85,14 @@ class UnscentedKalmanFilter:
         x = self.state_mean(X, self.Wm)
         D = self.state_residual(X, x)
         P = (D.T * self.Wc) @ D + m.Q(x, dt)
-        if u is not None:
-            B = m.control(dt)
-            if B is None:
-                raise ConfigError(f"{type(m).__name__} takes no control input")
-            x = x + B @ as_vector("u", u, B.shape[1])
-        if self.check and not np.isfinite(x).all():
-            raise NumericalError(f"prediction produced a non-finite state: {x}")
+        x = self._control(x, dt, u)
+        self._finite(x)
         return GaussianState(x, 0.5 * (P + P.T), int(t_ns))
 
     def update(
         self, state: GaussianState, z: ArrayLike, model: MeasurementModel, *, R: ArrayLike | None = None
     ) -> Update:
-        if self.check:
-            zv = as_vector("z", z, model.ndim_meas)
-            Rm = model.R if R is None else as_covariance("R", R, model.ndim_meas)
-        else:
-            zv = np.asarray(z, dtype=np.float64)
-            Rm = model.R if R is None else np.asarray(R, dtype=np.float64)
+        zv, Rm = self._measurement(z, R, model)
         X = self.sigma_points(state.x, state.P)
         Z = model.h(X)
         zhat = model.mean(Z, self.Wm)
