@@ -101,7 +101,6 @@ def constant_velocity(
     rng: np.random.Generator,
     speed_mps: tuple[float, float] = (8.0, 15.0),
     crossing: bool = False,
-    radius_m: float = 150.0,
     spread_m: float = 1000.0,
     manoeuvre: tuple[int, float, float, float] | None = None,
     lifetimes_s: Sequence[tuple[float, float]] | None = None,
@@ -109,8 +108,8 @@ def constant_velocity(
 ) -> Truth:
     """Constant-velocity targets on the tick grid.
 
-    crossing: targets start on a circle of radius_m around the origin and head through it at
-    different times (their paths all cross at the origin, passing it in turn ~1 s apart).
+    crossing: all paths cross at the origin; the targets pass it in turn, 1 s apart, around the
+    middle of the run (so at the crossing they are about one second of travel apart).
     Otherwise: start uniform in [-spread_m, spread_m]^2, random headings.
     manoeuvre: (target, start_s, stop_s, turn_rate_radps): that target turns at a constant
     rate in [start_s, stop_s). lifetimes_s: per target (appear_s, vanish_s).
@@ -120,10 +119,9 @@ def constant_velocity(
     x = np.empty((K, n_targets, 4))
     speed = rng.uniform(*speed_mps, size=n_targets)
     if crossing:
-        # Evenly spread directions (so crossing angles are large), each target passing the origin
-        # at its own time near the middle of the run.
-        th = 2 * np.pi * np.arange(n_targets) / n_targets + rng.uniform(-0.2, 0.2, size=n_targets)
-        th[n_targets // 2 :] += np.pi / n_targets  # avoid exactly head-on pairs
+        # Headings pi/n apart over a half turn (crossing angles >= pi/n - 0.2, never head-on),
+        # each target passing the origin at its own time, 1 s apart, around the middle of the run.
+        th = np.pi * np.arange(n_targets) / n_targets + rng.uniform(-0.1, 0.1, size=n_targets)
         t_cross = duration_s / 2 + (np.arange(n_targets) - (n_targets - 1) / 2) * 1.0
         v = -speed[:, None] * np.stack([np.cos(th), np.sin(th)], axis=1)
         p = -v * t_cross[:, None]
