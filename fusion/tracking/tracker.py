@@ -410,6 +410,8 @@ class Tracker:
             nt = self._birth(d, models[j], Rs[j], sm, scan_idx)
             born.append(nt)
             events.append(TrackEvent("born", nt.id, t_ns))
+            if nt.status == Status.CONFIRMED:  # confirm_m == 1: the first hit confirms
+                events.append(TrackEvent("confirmed", nt.id, t_ns))
             assoc.append(Association(d.sensor_id, d.t_ns, d.seq, "born", nt.id, None, ()))
             estimates.append(self._estimate(nt, d, None))
 
@@ -446,7 +448,8 @@ class Tracker:
         tid = track_id_for(d.sensor_id, d.seq)
         init = getattr(self.filter, "initial")  # noqa: B009 - every filter has initial()
         state = init(x, P, t_ns=d.t_ns)
-        return Track(tid, state, Status.TENTATIVE, 1, scan_idx, scan_idx, d.t_ns, (d.sensor_id, d.seq))
+        status = Status.CONFIRMED if self.config.lifecycle.confirm_m <= 1 else Status.TENTATIVE
+        return Track(tid, state, status, 1, scan_idx, scan_idx, d.t_ns, (d.sensor_id, d.seq))
 
     def _estimate(self, tr: Track, d: Detection, up: Update | None) -> Estimate:
         st = tr.state
