@@ -16,7 +16,10 @@ S = NS_PER_S
 CART = Sensor("cart", "cartesian", period_s=0.5, std_m=1.0)
 
 
-@pytest.mark.parametrize(("m", "n"), [(3, 5), (2, 3), (4, 4), (1, 3), (1, 1)], ids=["3of5", "2of3", "4of4", "1of3", "1of1"])
+MN = [(3, 5), (2, 3), (4, 4), (1, 3), (1, 1)]
+
+
+@pytest.mark.parametrize(("m", "n"), MN, ids=[f"{m}of{n}" for m, n in MN])
 def test_not_confirmed_before_m_hits(m: int, n: int) -> None:
     rng = np.random.default_rng(7)
     tr = make_tracker([CART], lifecycle=LifecycleConfig(confirm_m=m, confirm_n=n))
