@@ -43,6 +43,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--only", default="core,tracker,recording", help="comma-separated: core, tracker, recording")
     p.add_argument("--json", type=Path, help="also write the figures to this file")
     args = p.parse_args(argv)
+    from fusion.io.blas import pin_blas_threads
+
+    pin_blas_threads()
     os.environ.setdefault("XDG_CONFIG_HOME", "/tmp/fusion-bench-xdg")
     os.environ.setdefault("XDG_DATA_HOME", "/tmp/fusion-bench-xdg")
     print("machine:", ", ".join(f"{k} {v}" for k, v in machine().items()))

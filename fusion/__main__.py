@@ -134,6 +134,9 @@ def main(argv: list[str] | None = None) -> int:
     ip.set_defaults(func=_inspect)
 
     args = p.parse_args(argv)
+    from fusion.io.blas import pin_blas_threads
+
+    pin_blas_threads()
     logging.basicConfig(level=logging.DEBUG if args.verbose else logging.INFO,
                         format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     return int(args.func(args))

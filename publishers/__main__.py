@@ -28,6 +28,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--namespace", help="key namespace (default: the scenario's service namespace)")
     p.add_argument("--relative-time", action="store_true", help="sensor times from 0 instead of the wall clock")
     args = p.parse_args(argv)
+    from fusion.io.blas import pin_blas_threads
+
+    pin_blas_threads()
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
 
     import msgspec

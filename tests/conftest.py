@@ -10,7 +10,10 @@ from typing import Any
 
 import pytest
 
+from fusion.io.blas import pin_blas_threads
 from fusion.io.zenoh_bus import free_tcp_port, session_config
+
+pin_blas_threads()  # see fusion/io/blas.py: multi-threaded BLAS on 4x4 matrices is 10x slower under load
 
 
 @pytest.fixture(autouse=True, scope="session")

@@ -422,6 +422,8 @@ class Tracker:
             nt = self._birth(d, models[j], Rs[j], sm, scan_idx)
             born.append(nt)
             events.append(TrackEvent("born", nt.id, t_ns))
+            if nt.status == Status.CONFIRMED:  # confirm_m == 1: the first hit confirms
+                events.append(TrackEvent("confirmed", nt.id, t_ns))
             assoc.append(Association(d.sensor_id, d.t_ns, d.seq, "born", nt.id, None, ()))
             estimates.append(self._estimate(nt, d, None, mpos[j]))
 
@@ -527,12 +529,13 @@ class Tracker:
         x[pi] = p
         P = np.diag(self._init_diag)
         P[np.ix_(pi, pi)] = Ppos
-        tid = track_id_for(d.sensor_id, d.seq)
+        tid = track_id_for(d.sensor_id, d.seq, d.t_ns)
         if isinstance(self.filter, IMM):
             state: GaussianState | IMMState = self.filter.initial(x, P, t_ns=d.t_ns)
         else:  # x and P are built from validated input: no need to check them again
             state = GaussianState(x, 0.5 * (P + P.T), d.t_ns)
-        return Track(tid, state, Status.TENTATIVE, 1, scan_idx, scan_idx, d.t_ns, (d.sensor_id, d.seq))
+        status = Status.CONFIRMED if self.config.lifecycle.confirm_m <= 1 else Status.TENTATIVE
+        return Track(tid, state, status, 1, scan_idx, scan_idx, d.t_ns, (d.sensor_id, d.seq))
 
     def _estimate(self, tr: Track, d: Detection, up: Update | None, meas_pos: np.ndarray) -> Estimate:
         st = tr.state

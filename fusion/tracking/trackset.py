@@ -31,11 +31,12 @@ class Status(IntEnum):
 _LABELS = {Status.TENTATIVE: "tentative", Status.CONFIRMED: "confirmed"}
 
 
-def track_id_for(sensor_id: str, seq: int) -> int:
+def track_id_for(sensor_id: str, seq: int, t_ns: int) -> int:
     """A track's id, derived from the measurement that started it: the first 63 bits of
-    blake2b(sensor_id, seq). The same under any arrival order, and unique in practice
-    (a collision among a million tracks has probability ~1e-7)."""
-    h = hashlib.blake2b(f"{sensor_id}\x00{seq}".encode(), digest_size=8).digest()
+    blake2b(sensor_id, seq, t_ns). The same under any arrival order; a sensor that reuses a seq
+    (counter restart or wrap) at another time starts a track with another id; unique in
+    practice otherwise (a collision among a million tracks has probability ~1e-7)."""
+    h = hashlib.blake2b(f"{sensor_id}\x00{seq}\x00{t_ns}".encode(), digest_size=8).digest()
     return int.from_bytes(h, "big") >> 1
 
 
