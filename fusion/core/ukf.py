@@ -23,7 +23,7 @@ from fusion.core.kalman import LOG_2PI
 from fusion.core.measurement import MeasurementModel
 from fusion.core.motion import MotionModel
 from fusion.core.timebase import dt_seconds
-from fusion.errors import ConfigError, NumericalError
+from fusion.errors import ConfigError, NumericalError, ShapeError
 
 
 @dataclass(frozen=True, slots=True)
@@ -79,7 +79,11 @@ class UnscentedKalmanFilter:
         return self.motion.ndim_state
 
     def initial(self, x: ArrayLike, P: ArrayLike, *, t_ns: int) -> GaussianState:
-        return GaussianState.create(x, P, t_ns=t_ns)
+        """A validated initial state for this filter."""
+        st = GaussianState.create(x, P, t_ns=t_ns)
+        if st.ndim != self.ndim_state:
+            raise ShapeError(f"initial x has {st.ndim} components, the model has {self.ndim_state}")
+        return st
 
     def sigma_points(self, x: Array, P: Array) -> Array:
         """The 2n + 1 sigma points as rows."""
