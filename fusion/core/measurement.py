@@ -124,7 +124,7 @@ class Radar2D(MeasurementModel):
         ndim_state: int = 4,
     ) -> None:
         self.sensor = as_vector("position", position, 2)
-        self.heading_rad = float(heading_rad)
+        self.heading_rad = float(as_vector("heading_rad", heading_rad, 1)[0])
         self.pos_idx, self.vel_idx = tuple(pos_idx), tuple(vel_idx)
         self.range_rate = range_rate
         self.ndim_state = ndim_state
@@ -188,7 +188,7 @@ class Radar3D(MeasurementModel):
         ndim_state: int = 6,
     ) -> None:
         self.sensor = as_vector("position", position, 3)
-        self.heading_rad = float(heading_rad)
+        self.heading_rad = float(as_vector("heading_rad", heading_rad, 1)[0])
         self.pos_idx, self.vel_idx = tuple(pos_idx), tuple(vel_idx)
         self.range_rate = range_rate
         self.ndim_state = ndim_state
