@@ -96,7 +96,7 @@ def test_bearing_crossing_pi(geom: str, kind: str, range_rate: bool) -> None:
 
 def test_crossing_without_wrap_would_fail() -> None:
     """Sanity of the geometry: the raw bearing difference across the crossing is about 2 pi."""
-    _, meas, X, z, _, _ = _scenario((0.0, 0.0), 0.0, False, 11)
+    _, _meas, _X, z, _, _ = _scenario((0.0, 0.0), 0.0, False, 11)
     jumps = np.abs(np.diff(z[:, 1]))
     assert jumps.max() > 6.0
     assert np.abs(wrap_angle(np.diff(z[:, 1]))).max() < 0.1

@@ -91,7 +91,7 @@ def test_kf_matches_textbook(name: str, seed: int) -> None:
 def test_cv1d_d_control_input_matters() -> None:
     """The control input really enters: dropping it from the oracle breaks the agreement."""
     ref = reference("cv1d_d", seed=3)
-    F, Q, B, H, R = _spec("cv1d_d", ref.dt_s)
+    F, Q, _B, H, R = _spec("cv1d_d", ref.dt_s)
     run = run_reference(ref)
     xs_no_u, _ = _textbook_kf(ref, F, Q, None, H, R)
     assert np.max(np.abs(run.x - xs_no_u)) > 0.1

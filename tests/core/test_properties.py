@@ -38,7 +38,7 @@ def _problem(draw):
 def test_update_keeps_P_spd_and_shrinks_it(problem) -> None:
     seed, P, R, H, y = problem
     x = np.zeros(P.shape[0])
-    _, Pn, S, nis, ll = update_single(x, P, y, H, R)
+    _, Pn, _S, nis, ll = update_single(x, P, y, H, R)
     msg = f"seed={seed} n={P.shape[0]} m={R.shape[0]}"
     assert np.array_equal(Pn, Pn.T), msg
     scale = np.max(np.abs(P))
