@@ -52,7 +52,8 @@ CREATE_CASES = {
     "x_matrix": ([[1.0, 2.0]], np.eye(2), ShapeError, r"x must be a vector, got shape \(1, 2\)"),
     "x_nan": ([1.0, NAN], np.eye(2), NonFiniteError, "x holds NaN or inf"),
     "x_inf": ([INF, 0.0], np.eye(2), NonFiniteError, "x holds NaN or inf"),
-    "P_wrong_size": ([1.0, 2.0], np.eye(3), ShapeError, r"P must have shape \(2, 2\), got \(3, 3\)"),
+    "P_wrong_size": ([1.0, 2.0], np.eye(3), ShapeError,
+                     r"P must have shape \(2, 2\), got \(3, 3\)"),
     "P_vector": ([1.0, 2.0], [1.0, 1.0], ShapeError, r"P must be a matrix, got shape \(2,\)"),
     "P_nan": ([1.0, 2.0], [[1.0, NAN], [NAN, 1.0]], NonFiniteError, "P holds NaN or inf"),
     "P_inf": ([1.0, 2.0], [[INF, 0.0], [0.0, 1.0]], NonFiniteError, "P holds NaN or inf"),
@@ -163,14 +164,13 @@ def test_model_constructor_refuses(case: str) -> None:
     assert isinstance(info.value, FusionError)
 
 
+@pytest.mark.parametrize("heading", [NAN, INF], ids=["nan", "inf"])
 @pytest.mark.parametrize("cls", [Radar2D, Radar3D], ids=["radar2d", "radar3d"])
-def test_radar_heading_must_be_finite(cls) -> None:
+def test_radar_heading_must_be_finite(cls, heading: float) -> None:
+    """Before the fix a NaN heading was accepted and silently made every update NaN."""
     R = [1.0, 1.0] if cls is Radar2D else [1.0, 1.0, 1.0]
-    try:
-        cls(R=R, heading_rad=NAN)
-    except NonFiniteError:
-        return
-    raise AssertionError(f"{cls.__name__}(heading_rad=nan) was accepted")
+    with pytest.raises(NonFiniteError, match="heading_rad holds NaN or inf"):
+        cls(R=R, heading_rad=heading)
 
 
 # --- time -------------------------------------------------------------------------------------
@@ -196,7 +196,8 @@ def test_predict_dt_zero_is_identity(model: str, kind: str) -> None:
     motion, x = MODELS_DT0[model]
     if kind == "kf" and not motion.is_linear:
         pytest.skip("the KF takes linear models only (see test_kf_refuses_nonlinear)")
-    f = {"kf": KalmanFilter, "ekf": ExtendedKalmanFilter, "ukf": UnscentedKalmanFilter}[kind](motion)
+    cls = {"kf": KalmanFilter, "ekf": ExtendedKalmanFilter, "ukf": UnscentedKalmanFilter}[kind]
+    f = cls(motion)
     rng = np.random.default_rng(5)
     A = rng.standard_normal((x.size, x.size))
     P = A @ A.T + x.size * np.eye(x.size)
@@ -211,7 +212,8 @@ def test_predict_dt_zero_is_identity(model: str, kind: str) -> None:
 # --- configuration ----------------------------------------------------------------------------
 
 def test_kf_refuses_nonlinear_motion() -> None:
-    with pytest.raises(ConfigError, match="KalmanFilter needs a linear motion model, got CoordinatedTurn"):
+    match = "KalmanFilter needs a linear motion model, got CoordinatedTurn"
+    with pytest.raises(ConfigError, match=match):
         KalmanFilter(CoordinatedTurn(q_accel=1.0, q_turn=0.1))
 
 
@@ -220,7 +222,8 @@ def test_kf_refuses_nonlinear_motion() -> None:
 def test_kf_refuses_nonlinear_measurement(meas) -> None:
     kf = KalmanFilter(ConstantVelocity(ndim=3, q=1.0))
     st = kf.initial(np.ones(6), np.eye(6), t_ns=0)
-    with pytest.raises(ConfigError, match=f"needs a linear measurement model, got {type(meas).__name__}"):
+    match = f"needs a linear measurement model, got {type(meas).__name__}"
+    with pytest.raises(ConfigError, match=match):
         kf.update(st, np.ones(meas.ndim_meas), meas)
 
 

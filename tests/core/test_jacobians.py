@@ -54,9 +54,9 @@ def test_coordinated_turn_jacobian(omega: str, dt: float) -> None:
     J = CT.jacobian(x, dt)
     # the omega column's finite difference needs a step larger than the series threshold
     Jfd = _fd(lambda s: CT.f(s, dt), x)
-    w = x.copy()
     h = 1e-4
-    Jfd[:, 4] = (CT.f(w + [0, 0, 0, 0, h], dt) - CT.f(w - [0, 0, 0, 0, h], dt)) / (2 * h)
+    e4 = np.array([0.0, 0.0, 0.0, 0.0, h])
+    Jfd[:, 4] = (CT.f(x + e4, dt) - CT.f(x - e4, dt)) / (2 * h)
     # O(h^2) truncation of the omega column: third derivative of f in omega ~ |v| dt^4
     _assert_jac(J, Jfd, 1e-6, f"CT omega={OMEGAS[omega]} dt={dt}")
 

@@ -102,8 +102,9 @@ def test_ukf_equals_kf_on_linear_models(name: str, points: str) -> None:
     ukf = run_reference(ref, UnscentedKalmanFilter(ref.motion, points=POINTS[points]))
     msg = f"{name} seed={seed} points={points}"
     for k in range(ref.n_steps):
-        assert _rel(ukf.x[k], kf.x[k]) < 1e-9, f"{msg}: x at step {k}: {_rel(ukf.x[k], kf.x[k]):.3g}"
-        assert _rel(ukf.P[k], kf.P[k]) < 1e-9, f"{msg}: P at step {k}: {_rel(ukf.P[k], kf.P[k]):.3g}"
+        ex, eP = _rel(ukf.x[k], kf.x[k]), _rel(ukf.P[k], kf.P[k])
+        assert ex < 1e-9, f"{msg}: x at step {k}: {ex:.3g}"
+        assert eP < 1e-9, f"{msg}: P at step {k}: {eP:.3g}"
     np.testing.assert_allclose(ukf.nis, kf.nis, rtol=1e-7, atol=1e-9, err_msg=msg)
 
 
@@ -155,7 +156,8 @@ def test_imm_combine_is_moment_matching() -> None:
         st = imm.update(imm.predict(st, (k + 1) * 100_000_000), rng.standard_normal(2), meas).state
     xs = np.stack([c.x for c in st.components])
     x = st.mu @ xs
-    P = sum(m * (c.P + np.outer(c.x - x, c.x - x)) for m, c in zip(st.mu, st.components, strict=True))
+    pairs = zip(st.mu, st.components, strict=True)
+    P = sum(m * (c.P + np.outer(c.x - x, c.x - x)) for m, c in pairs)
     np.testing.assert_allclose(st.x, x, rtol=1e-12, atol=1e-14, err_msg="seed=9")
     np.testing.assert_allclose(st.P, P, rtol=1e-12, atol=1e-14, err_msg="seed=9")
     assert st.mu.sum() == pytest.approx(1.0, abs=1e-12)

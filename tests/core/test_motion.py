@@ -62,7 +62,7 @@ PAIRS = ((0.1, 0.2), (1.0, 2.5), (0.0, 0.7), (1e-3, 3.0))
 @pytest.mark.parametrize("pair", PAIRS, ids=[f"{a}+{b}" for a, b in PAIRS])
 @pytest.mark.parametrize("kind", list(KINDS), ids=list(KINDS))
 def test_F_semigroup_and_Q_additivity(kind: str, pair: tuple[float, float]) -> None:
-    """F(a) F(b) = F(a + b); and the exact discretisation composes: Q(a + b) = F(b) Q(a) F(b)' + Q(b)."""
+    """F(a) F(b) = F(a + b); the exact discretisation composes: Q(a+b) = F(b) Q(a) F(b)' + Q(b)."""
     a, b = pair
     m = KINDS[kind][0](ndim=2, q=1.3)
     Fa, Fb, Fab = m.F(a).copy(), m.F(b).copy(), m.F(a + b).copy()
