@@ -325,7 +325,8 @@ class RerunSink:
             elif c.kind == "tentative":
                 pts = np.stack(d["p"])
                 arch = rr.Points2D if pts.shape[1] == 2 else rr.Points3D
-                columns = arch.columns(positions=pts, labels=d["label"],
+                # ids kept as labels (hover shows them) but not drawn: clutter would bury the view
+                columns = arch.columns(positions=pts, labels=d["label"], show_labels=np.zeros(n, dtype=bool),
                                        colors=np.tile(np.array(_COLOURS["tentative"], dtype=np.uint8), (n, 1)))
             elif c.kind == "text":
                 columns = rr.TextLog.columns(text=d["text"], level=d["level"])
@@ -381,8 +382,11 @@ class RerunSink:
     def _send_blueprint(self) -> None:
         import rerun.blueprint as rrb
 
-        world = rrb.Spatial2DView(origin="world", name="Trajectories") if self.ndim <= 2 else rrb.Spatial3DView(
-            origin="world", name="Trajectories")
+        # Trails: everything up to the time cursor, so the view shows trajectories, not dots.
+        history = rrb.VisibleTimeRange("t", start=rrb.TimeRangeBoundary.infinite(),
+                                       end=rrb.TimeRangeBoundary.cursor_relative())
+        view = rrb.Spatial2DView if self.ndim <= 2 else rrb.Spatial3DView
+        world = view(origin="world", name="Trajectories", time_ranges=history)
         bp = rrb.Blueprint(
             rrb.Horizontal(
                 rrb.Vertical(world, rrb.TextLogView(origin="events", name="Events"), row_shares=[3, 1]),
