@@ -34,7 +34,7 @@ from __future__ import annotations
 import json
 import time
 from collections import defaultdict
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -422,6 +422,3 @@ def _quat_xyzw(V: Array) -> Array:
     q[3] = (m[k, j] - m[j, k]) / s
     return q
 
-
-def positions_of(points: Iterable[Array]) -> Array:
-    return np.stack(list(points))

@@ -144,6 +144,8 @@ class Tracker:
     """Tracks many targets from many sensors; see the module docstring for the algorithm."""
 
     def __init__(self, config: TrackerConfig) -> None:
+        if not config.sensors:
+            raise ConfigError("a tracker needs at least one sensor")
         self.config = config
         self.motion = motion_model(config.motion)
         self.filter = make_filter(config.motion)
@@ -569,10 +571,3 @@ def _with_revision(e: Estimate, rev: int) -> Estimate:
         return e
     return Estimate(e.track_id, e.t_ns, e.sensor_id, e.seq, e.x, e.P, e.status, rev, e.nis, e.y, e.S,
                     e.mode_probabilities, e.meas_pos)
-
-
-def build_tracker(config: TrackerConfig) -> Tracker:
-    """A Tracker from a validated configuration (ConfigError if the combination cannot work)."""
-    if not config.sensors:
-        raise ConfigError("a tracker needs at least one sensor")
-    return Tracker(config)
