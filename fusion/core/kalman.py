@@ -20,6 +20,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 from scipy.linalg.lapack import dpotrf, dtrtrs
 
+from fusion.core import compiled as _compiled
 from fusion.core.checks import Array, as_covariance, as_vector
 from fusion.core.gaussian import GaussianState, Update
 from fusion.core.measurement import MeasurementModel
@@ -75,6 +76,19 @@ def update_arrays(
 
 
 def update_single(x: Array, P: Array, y: Array, H: Array, R: Array) -> tuple[Array, Array, Array, float, float]:
+    """`update_arrays` for one state: the compiled kernel (fusion.core.compiled) on float64
+    arrays. Raises NumericalError where S is not positive definite."""
+    ok, xn, Pn, S, nis, ll = _compiled.update(
+        x, P, y, np.ascontiguousarray(H, dtype=np.float64), np.ascontiguousarray(R, dtype=np.float64))
+    if not ok:
+        raise NumericalError(
+            "innovation covariance S = H P H' + R is not positive definite; "
+            "check R and the track covariance P"
+        )
+    return xn, Pn, S, nis, ll
+
+
+def update_single_numpy(x: Array, P: Array, y: Array, H: Array, R: Array) -> tuple[Array, Array, Array, float, float]:
     """`update_arrays` for one state, through LAPACK directly (potrf, trtrs), with as few numpy
     calls as the math allows (each costs ~1 us here). The Joseph form is used expanded:
         (I - K H) P (I - K H)' + K R K' = P - A - A' + K S K',   A = K H P,
@@ -158,9 +172,9 @@ class ExtendedKalmanFilter(FilterBase):
         dt = dt_seconds(state.t_ns, t_ns)
         m = self.motion
         F = m.jacobian(state.x, dt)  # at the prior state
-        x = F @ state.x if m.is_linear else m.f(state.x, dt)
-        P = F @ state.P @ F.T
-        P += m.Q(state.x, dt)  # symmetrised by the update (and exactly symmetric up to rounding)
+        x, P = _compiled.predict_linear(state.x, state.P, F, m.Q(state.x, dt))
+        if not m.is_linear:
+            x = m.f(state.x, dt)
         x = self._control(x, dt, u)
         self._finite(x)
         return GaussianState(x, P, int(t_ns))
