@@ -13,6 +13,7 @@ Each model works on one state (n,) or a stack (..., n). Angles in z are wrapped 
 
 from __future__ import annotations
 
+import math
 from abc import ABC, abstractmethod
 
 import numpy as np
@@ -22,6 +23,16 @@ from fusion.core.checks import Array, as_covariance, as_vector
 from fusion.errors import ConfigError
 
 TWO_PI = 2.0 * np.pi
+
+
+def _wrap1(a: float) -> float:
+    """wrap_angle for one float: pi - ((pi - a) mod 2 pi), with the same edge at +pi."""
+    r = math.pi - math.fmod(math.pi - a, TWO_PI)
+    if r > math.pi:  # fmod keeps the sign of its argument; numpy's mod does not
+        r -= TWO_PI
+    if abs(r) > math.pi - 1e-9:  # at the +-pi edge, exactly what wrap_angle does
+        return float(wrap_angle(a))
+    return r
 
 
 def wrap_angle(a: ArrayLike) -> Array:
@@ -53,6 +64,10 @@ class MeasurementModel(ABC):
     def residual(self, z: Array, zhat: Array) -> Array:
         """z - zhat with angle components wrapped into (-pi, pi]."""
         y = z - zhat
+        if y.ndim == 1:  # one measurement: plain floats are ~10x cheaper than ufuncs here
+            for i in self.angle_indices:
+                y[i] = _wrap1(float(y[i]))
+            return y
         if self.angle_indices:
             idx = list(self.angle_indices)
             y[..., idx] = wrap_angle(y[..., idx])
@@ -129,6 +144,7 @@ class Radar2D(MeasurementModel):
         ndim_state: int = 4,
     ) -> None:
         self.sensor = as_vector("position", position, 2)
+        self._sx, self._sy = float(self.sensor[0]), float(self.sensor[1])
         self.heading_rad = _heading(heading_rad)
         self.pos_idx, self.vel_idx = tuple(pos_idx), tuple(vel_idx)
         self.range_rate = range_rate
@@ -138,6 +154,14 @@ class Radar2D(MeasurementModel):
         self.R = _noise(R, self.ndim_meas)
 
     def h(self, x: Array) -> Array:
+        if x.ndim == 1:  # one state: math on floats
+            dx = float(x[self.pos_idx[0]]) - self._sx
+            dy = float(x[self.pos_idx[1]]) - self._sy
+            r = math.hypot(dx, dy)
+            out = [r, _wrap1(math.atan2(dy, dx) - self.heading_rad)]
+            if self.range_rate:
+                out.append((dx * float(x[self.vel_idx[0]]) + dy * float(x[self.vel_idx[1]])) / r)
+            return np.array(out)
         dx = x[..., self.pos_idx[0]] - self.sensor[0]
         dy = x[..., self.pos_idx[1]] - self.sensor[1]
         r = np.hypot(dx, dy)
