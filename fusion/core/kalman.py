@@ -18,7 +18,6 @@ import math
 
 import numpy as np
 from numpy.typing import ArrayLike
-from scipy.linalg.lapack import dpotrf, dtrtrs
 
 from fusion.core import compiled as _compiled
 from fusion.core.checks import Array, as_covariance, as_vector
@@ -111,38 +110,6 @@ def update_single(x: Array, P: Array, y: Array, H: Array, R: Array) -> tuple[Arr
             "check R and the track covariance P"
         )
     return xn, Pn, S, nis, ll
-
-
-def update_single_numpy(x: Array, P: Array, y: Array, H: Array, R: Array) -> tuple[Array, Array, Array, float, float]:
-    """`update_arrays` for one state, through LAPACK directly (potrf, trtrs), with as few numpy
-    calls as the math allows (each costs ~1 us here). The Joseph form is used expanded:
-        (I - K H) P (I - K H)' + K R K' = P - A - A' + K S K',   A = K H P,
-    an identity for any gain K, so it keeps the Joseph form's robustness to an inexact K."""
-    PHt = P @ H.T
-    S = H @ PHt + R
-    L, info = dpotrf(S, lower=1, clean=1)
-    if info != 0:
-        raise NumericalError(
-            "innovation covariance S = H P H' + R is not positive definite; "
-            "check R and the track covariance P"
-        )
-    W, _ = dtrtrs(L, PHt.T, lower=1)  # L^-1 H P
-    Kt, _ = dtrtrs(L, W, lower=1, trans=1)  # S^-1 H P = K'
-    w, _ = dtrtrs(L, y, lower=1)
-    nis = float(w @ w)
-    m = y.shape[0]
-    det_l = 1.0
-    for i in range(m):  # log det S = 2 log prod diag(L), in floats: ~10x cheaper than numpy here
-        det_l *= L[i, i]
-    logdet = 2.0 * math.log(det_l)
-    K = Kt.T
-    A = K @ PHt.T
-    Pn = P - A
-    Pn -= A.T
-    Pn += K @ S @ Kt
-    Pn += Pn.T
-    Pn *= 0.5
-    return x + K @ y, Pn, S, nis, -0.5 * (nis + logdet + m * LOG_2PI)
 
 
 class FilterBase:
