@@ -20,7 +20,8 @@ import msgspec
 from fusion.io import wire
 from fusion.io.rerun_sink import RerunSink
 from fusion.pipeline import Pipeline
-from fusion.tracking.tracker import StepResult, Tracker
+from fusion.tracking.results import StepResult
+from fusion.tracking.tracker import Tracker
 from publishers.spec import load_scenario_file, scenario_path
 from publishers.stream import build_stream
 

@@ -15,7 +15,7 @@ import time
 
 import numpy as np
 
-from fusion.config import LifecycleConfig, MotionConfig, SensorConfig, TimeConfig, TrackerConfig
+from fusion.config import CartesianSensorConfig, LifecycleConfig, MotionConfig, TimeConfig, TrackerConfig
 from fusion.tracking.detection import Detection
 from fusion.tracking.tracker import Tracker
 
@@ -37,8 +37,8 @@ def scans(n_targets: int, n_scans: int, *, seed: int = 0) -> list[list[tuple[flo
 
 
 def fusion_per_scan(data: list, *, warm: int = 5) -> list[float]:
-    cfg = TrackerConfig(sensors=[SensorConfig(id="cam", kind="cartesian", std_m=[1.0, 1.0])],
-                        motion=MotionConfig(q_mps2=0.5), lifecycle=LifecycleConfig(max_tracks=1_000_000))
+    cfg = TrackerConfig(sensors=[CartesianSensorConfig(id="cam", std_m=[1.0, 1.0])],
+                        motion=MotionConfig(accel_psd_m2s3=0.25), lifecycle=LifecycleConfig(max_tracks=1_000_000))
     tr = Tracker(cfg)
     seq = 0
     out = []
@@ -112,8 +112,8 @@ def stonesoup_per_scan(data: list, *, warm: int = 5) -> list[float]:
 def late_cost(n_targets: int = 100, n_scans: int = 40, backs: tuple[int, ...] = (0, 1, 5, 10, 20)) -> dict[int, float]:
     """Cost of one measurement that lands `back` scans before the newest (replaying them)."""
     data = scans(n_targets, n_scans, seed=1)
-    cfg = TrackerConfig(sensors=[SensorConfig(id="cam", kind="cartesian", std_m=[1.0, 1.0])],
-                        motion=MotionConfig(q_mps2=0.5), time=TimeConfig(lag_s=10.0))
+    cfg = TrackerConfig(sensors=[CartesianSensorConfig(id="cam", std_m=[1.0, 1.0])],
+                        motion=MotionConfig(accel_psd_m2s3=0.25), time=TimeConfig(lag_s=10.0))
     out = {}
     for back in backs:
         costs = []

@@ -19,43 +19,73 @@ NonNegFloat = Annotated[float, msgspec.Meta(ge=0.0, le=1e12)]
 Coord = Annotated[float, msgspec.Meta(ge=-1e12, le=1e12)]
 Angle = Annotated[float, msgspec.Meta(ge=-2 * math.pi, le=2 * math.pi)]
 Prob = Annotated[float, msgspec.Meta(gt=0.0, lt=1.0)]
+SensorId = Annotated[str, msgspec.Meta(pattern=r"^[A-Za-z0-9_.\-]{1,64}\Z")]
 
 
 class Section(msgspec.Struct, frozen=True, forbid_unknown_fields=True, kw_only=True):
     """Base of every configuration section."""
 
 
-class SensorConfig(Section):
-    """One sensor. kind "cartesian": std_m per axis. kind "radar": range/bearing noise; with
-    ndim 3 the radar also reports elevation; range_rate_std_mps is used when a return carries
-    a range rate. position_m and heading_rad place the sensor in the world frame."""
+class _SensorBase(Section, tag_field="kind"):
+    """What every sensor has: an id, a pose in the world frame (position_m, heading_rad about
+    the vertical axis) and an optional coverage. A sensor "could have seen" a track when the
+    track's predicted position lies in its coverage; without a coverage, when the sensor has
+    updated that track before. Only such sensors' scans count as chances (and misses) for a
+    track's confirmation and deletion."""
 
-    id: str
-    kind: Literal["cartesian", "radar"]
+    id: SensorId
     position_m: list[Coord] = []
     heading_rad: Angle = 0.0
-    std_m: list[PosFloat] = []
-    range_std_m: PosFloat = 1.0
-    bearing_std_rad: PosFloat = 0.01
-    elevation_std_rad: PosFloat = 0.01
-    range_rate_std_mps: PosFloat = 1.0
+    max_range_m: PosFloat | None = None  # coverage: distance from position_m
+    region_m: list[Coord] = []  # coverage: [xmin, xmax, ymin, ymax(, zmin, zmax)] in the world frame
+
+
+class CartesianSensorConfig(_SensorBase, tag="cartesian"):
+    """A position sensor: z is the target's position. std_m (per axis) is the noise used when a
+    message carries none."""
+
+    std_m: list[PosFloat] | None = None
+
+
+class RadarSensorConfig(_SensorBase, tag="radar"):
+    """A range-bearing radar (elevation with ndim 3, optional range rate). The standard
+    deviations are the noise used when a message carries none."""
+
+    range_std_m: PosFloat | None = None
+    bearing_std_rad: PosFloat | None = None
+    elevation_std_rad: PosFloat | None = None
+    range_rate_std_mps: PosFloat | None = None
+
+
+SensorConfig = CartesianSensorConfig | RadarSensorConfig
+
+
+class ModeConfig(Section):
+    """One mode of an IMM: a motion model, its noise, and its mean sojourn time (how long the
+    target stays in the mode on average; the switching rate out of it is 1 / sojourn_s)."""
+
+    model: Literal["cv", "ct"]
+    accel_psd_m2s3: NonNegFloat = 1.0
+    turn_psd_rad2s3: NonNegFloat = 1e-4
+    sojourn_s: PosFloat = 10.0
 
 
 class MotionConfig(Section):
     """The motion model of every track.
 
     model: "cv" constant velocity, "ca" constant acceleration, "ct" coordinated turn (2-D),
-    "imm_cv" an IMM of two constant-velocity models (q_mps2 and q_high_mps2).
-    q_mps2: white-noise acceleration density (jerk density for "ca").
+    "imm" an interacting multiple model over `modes`.
+    accel_psd_m2s3: power spectral density of the white acceleration noise (m^2/s^3), q^2 in
+    Q_axis = q^2 [[dt^3/3, dt^2/2], [dt^2/2, dt]]; for "ca" it is the jerk density (m^2/s^5).
+    turn_psd_rad2s3: density of the white turn-rate noise of "ct" (rad^2/s^3).
     filter: "ekf" (exact KF on linear models) or "ukf".
     """
 
-    model: Literal["cv", "ca", "ct", "imm_cv"] = "cv"
+    model: Literal["cv", "ca", "ct", "imm"] = "cv"
     ndim: Literal[1, 2, 3] = 2
-    q_mps2: NonNegFloat = 1.0
-    q_high_mps2: NonNegFloat = 10.0
-    q_turn_radps: NonNegFloat = 0.05
-    imm_p_stay: Prob = 0.95
+    accel_psd_m2s3: NonNegFloat = 1.0
+    turn_psd_rad2s3: NonNegFloat = 1e-4
+    modes: list[ModeConfig] = []
     filter: Literal["ekf", "ukf"] = "ekf"
 
 
@@ -76,9 +106,12 @@ class GateConfig(Section):
 
 
 class LifecycleConfig(Section):
-    """M-of-N confirmation (scans counted over all sensors); deletion of confirmed tracks after
-    max_misses scans without a hit, coast_s seconds without an update, or a predicted position
-    standard deviation above max_position_std_m."""
+    """M-of-N confirmation and deletion, counted in chances: scans of a sensor that could have
+    seen the track (see the sensors' coverage). A tentative track is confirmed by confirm_m hits
+    within its first confirm_n chances and deleted when it misses that. A confirmed track is
+    deleted after more than max_misses chances in a row without a hit, after coast_s seconds
+    without an update, or when its predicted position standard deviation exceeds
+    max_position_std_m."""
 
     confirm_m: Annotated[int, msgspec.Meta(ge=1)] = 3
     confirm_n: Annotated[int, msgspec.Meta(ge=1)] = 5
@@ -89,13 +122,23 @@ class LifecycleConfig(Section):
 
 
 class TimeConfig(Section):
-    """Out-of-order window: late data within lag_s (and max_lag_scans scans) is replayed
-    exactly; older data is refused as too_late. Data more than future_s ahead of the newest
-    time seen is refused as future."""
+    """The out-of-order window, in sensor time.
+
+    The tracker's clock is robust to a few wrong timestamps: each valid measurement i gives an
+    offset t_i - a_i (a_i its arrival time, 0 when unknown) and now = a + the
+    (clock_outliers + 1)-th largest of the last clock_samples offsets: it follows the freshest
+    data, but clock_outliers wrong timestamps cannot push it. Data older than now - lag_s is
+    refused as too_late (the horizon only moves forward), data more than future_s ahead of now
+    as future. Inside the window late data
+    is replayed exactly. max_lag_scans caps the history kept for replays (a memory guard:
+    when it bites, older scans are committed early and data before them is too_late).
+    """
 
     lag_s: NonNegFloat = 2.0
-    max_lag_scans: Annotated[int, msgspec.Meta(ge=1)] = 100_000
     future_s: PosFloat = 10.0
+    clock_samples: Annotated[int, msgspec.Meta(ge=1, le=1000)] = 16
+    clock_outliers: Annotated[int, msgspec.Meta(ge=0, le=100)] = 1
+    max_lag_scans: Annotated[int, msgspec.Meta(ge=1)] = 100_000
 
 
 class TrackerConfig(Section):
@@ -112,17 +155,25 @@ class TrackerConfig(Section):
         ids = [s.id for s in self.sensors]
         if len(set(ids)) != len(ids):
             raise ValueError(f"sensor ids must be unique, got {ids}")
+        if self.time.clock_outliers >= self.time.clock_samples:
+            raise ValueError("time.clock_outliers must be smaller than time.clock_samples")
         if self.lifecycle.confirm_m > self.lifecycle.confirm_n:
             raise ValueError("confirm_m must not exceed confirm_n")
-        d = self.motion.ndim
-        if self.motion.model == "ct" and d != 2:
+        m, d = self.motion, self.motion.ndim
+        if (m.model == "ct" or any(x.model == "ct" for x in m.modes)) and d != 2:
             raise ValueError("the coordinated-turn model is 2-D: set motion.ndim = 2")
+        if m.model == "imm" and len(m.modes) < 2:
+            raise ValueError("motion.model = 'imm' needs at least two [[motion.modes]]")
+        if m.model != "imm" and m.modes:
+            raise ValueError("motion.modes are used only with motion.model = 'imm'")
         for s in self.sensors:
-            if s.kind == "radar" and d == 1:
+            if isinstance(s, RadarSensorConfig) and d == 1:
                 raise ValueError(f"sensor {s.id}: a radar needs a 2-D or 3-D state (motion.ndim)")
             if s.position_m and len(s.position_m) != d:
                 raise ValueError(f"sensor {s.id}: position_m must have {d} components")
-            if s.kind == "cartesian" and len(s.std_m) != d:
+            if s.region_m and len(s.region_m) != 2 * d:
+                raise ValueError(f"sensor {s.id}: region_m must have {2 * d} values [min, max per axis]")
+            if isinstance(s, CartesianSensorConfig) and s.std_m is not None and len(s.std_m) != d:
                 raise ValueError(f"sensor {s.id}: std_m must have {d} components")
 
 

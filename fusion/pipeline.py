@@ -23,7 +23,8 @@ import numpy as np
 from fusion.io.latency import LatencyTracker
 from fusion.io.ratelimit import RateLimitedLog
 from fusion.tracking.detection import Detection, Reason
-from fusion.tracking.tracker import Estimate, StepResult, Tracker
+from fusion.tracking.results import Estimate, StepResult
+from fusion.tracking.tracker import Tracker
 
 log = logging.getLogger("fusion.pipeline")
 

@@ -28,7 +28,8 @@ from fusion.io.recording import RotatingSink
 from fusion.io.rerun_sink import RerunSink
 from fusion.io.zenoh_bus import session_config
 from fusion.pipeline import Pipeline, Record
-from fusion.tracking.tracker import Estimate, Tracker
+from fusion.tracking.results import Estimate
+from fusion.tracking.tracker import Tracker
 
 log = logging.getLogger("fusion.service")
 

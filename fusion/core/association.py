@@ -8,10 +8,12 @@ which is exact for linear Cartesian models (margin 1) and a generous prefilter o
 Candidates are found by a sweep over tracks sorted on the first axis, so the cost grows with
 the number of candidate pairs, not with tracks x measurements.
 
-Assignment. Among gated pairs with costs d2_ij (NIS), GNN minimises the sum of pair costs
-plus g/2 for each unassigned track and each unassigned measurement, so a pair is taken only
-when it beats leaving both free (d2 < g). The problem splits into connected components of the
-gated-pair graph; each is solved with scipy's linear_sum_assignment.
+Assignment. Among gated pairs with costs c_ij (the negative log-likelihood NIS + ln det S)
+and limits l_ij (g + ln det S: the cost at the gate's edge), GNN minimises the sum of pair
+costs plus, for each unassigned track and each unassigned measurement, half the largest limit
+of its component, so a pair alone is always taken (c < l) and pairs compete by likelihood.
+The problem splits into connected components of the gated-pair graph; each is solved with
+scipy's linear_sum_assignment.
 """
 
 from __future__ import annotations
@@ -57,19 +59,21 @@ def coarse_pairs(
 
 
 def gnn_assign(
-    ti: np.ndarray, mj: np.ndarray, cost: Array, *, n_tracks: int, n_meas: int, miss_cost: float
+    ti: np.ndarray, mj: np.ndarray, cost: Array, limit: Array, *, n_tracks: int, n_meas: int
 ) -> list[tuple[int, int]]:
-    """Optimal assignment over gated pairs (ti[p], mj[p]) with cost[p]; unassigned costs miss_cost
-    per track and per measurement. Returns (track, measurement) pairs sorted by measurement."""
+    """Optimal assignment over gated pairs (ti[p], mj[p]) with cost[p] and limit[p] (see the
+    module docstring). Returns (track, measurement) pairs sorted by measurement."""
     if ti.size == 0:
         return []
+    cost = np.asarray(cost, dtype=np.float64)
+    limit = np.asarray(limit, dtype=np.float64)
     g = coo_matrix((np.ones(ti.size), (ti, n_tracks + mj)), shape=(n_tracks + n_meas,) * 2)
     _, labels = connected_components(g, directed=False)
     comp = labels[ti]
     sizes = np.bincount(comp, minlength=labels.max() + 1)
     # Components with one gated pair (the common case) are decided at once: take it if it wins.
     single = sizes[comp] == 1
-    take = single & (cost < 2.0 * miss_cost)
+    take = single & (cost < limit)
     out: list[tuple[int, int]] = list(zip(ti[take].tolist(), mj[take].tolist(), strict=True))
     big = 1e18
     rest = np.flatnonzero(~single)
@@ -77,6 +81,7 @@ def gnn_assign(
         order = rest[np.argsort(comp[rest], kind="stable")]
         bounds = np.flatnonzero(np.diff(comp[order])) + 1
         for sel in np.split(order, bounds):
+            miss_cost = 0.5 * float(limit[sel].max())
             ut, it = np.unique(ti[sel], return_inverse=True)
             um, im = np.unique(mj[sel], return_inverse=True)
             a, b = ut.size, um.size

@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from fusion.io.rerun_sink import RerunSink
-from fusion.tracking.tracker import StepResult
+from fusion.tracking.results import StepResult
 
 
 class RotatingSink:

@@ -41,7 +41,7 @@ from typing import Any
 import numpy as np
 
 from fusion.core.checks import Array
-from fusion.tracking.tracker import Estimate, StepResult
+from fusion.tracking.results import Estimate, StepResult
 
 MATCH_D2 = 100.0  # squared Mahalanobis distance (position) within which a truth target is matched
 _COLOURS = {"tentative": (160, 160, 160), "confirmed": (40, 160, 255)}

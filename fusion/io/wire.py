@@ -11,7 +11,7 @@ import numpy as np
 from fusion import messages as m
 from fusion.pipeline import BadSample
 from fusion.tracking.detection import Detection, Reason
-from fusion.tracking.tracker import Estimate
+from fusion.tracking.results import Estimate
 
 STREAM_SUFFIX = ".fstream"
 

@@ -29,6 +29,7 @@ class Detection:
     Cartesian sensors: z = position (d,). Radar (2-D): [range_m, bearing_rad] or
     [range_m, bearing_rad, range_rate_mps]; radar (3-D): [range_m, azimuth_rad, elevation_rad]
     with an optional range rate last. R is the noise covariance; None takes the sensor's default.
+    arrival_ns: when it arrived (the intake's clock), None when unknown.
     """
 
     sensor_id: str
@@ -36,6 +37,7 @@ class Detection:
     seq: int
     z: Array
     R: Array | None = None
+    arrival_ns: int | None = None
 
     @property
     def key(self) -> tuple[int, str, int]:
@@ -43,10 +45,11 @@ class Detection:
         return (self.t_ns, self.sensor_id, self.seq)
 
     @classmethod
-    def of(cls, sensor_id: str, t_ns: int, seq: int, z: object, R: object | None = None) -> Detection:
+    def of(cls, sensor_id: str, t_ns: int, seq: int, z: object, R: object | None = None,
+           arrival_ns: int | None = None) -> Detection:
         return cls(
             sensor_id, int(t_ns), int(seq), np.asarray(z, dtype=np.float64),
-            None if R is None else np.asarray(R, dtype=np.float64),
+            None if R is None else np.asarray(R, dtype=np.float64), None if arrival_ns is None else int(arrival_ns),
         )
 
 

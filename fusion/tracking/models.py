@@ -2,11 +2,18 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
-from fusion.config import MotionConfig, SensorConfig, TrackerConfig
+from fusion.config import (
+    CartesianSensorConfig,
+    MotionConfig,
+    RadarSensorConfig,
+    SensorConfig,
+    TrackerConfig,
+)
 from fusion.core.checks import Array
 from fusion.core.imm import IMM, Filter
 from fusion.core.kalman import ExtendedKalmanFilter
@@ -18,20 +25,30 @@ from fusion.errors import ConfigError
 AXES = ("x", "y", "z")
 
 
-def motion_model(cfg: MotionConfig, *, q: float | None = None) -> MotionModel:
-    q = cfg.q_mps2 if q is None else q
-    if cfg.model in ("cv", "imm_cv"):
-        return ConstantVelocity(ndim=cfg.ndim, q=q)
+def _q(psd: float) -> float:
+    """The core models take q, the square root of the noise's spectral density."""
+    return math.sqrt(psd)
+
+
+def motion_model(cfg: MotionConfig) -> MotionModel:
+    """The motion model of a single-model tracker (the state space of an IMM's modes)."""
+    if cfg.model == "cv":
+        return ConstantVelocity(ndim=cfg.ndim, q=_q(cfg.accel_psd_m2s3))
     if cfg.model == "ca":
-        return ConstantAcceleration(ndim=cfg.ndim, q=q)
+        return ConstantAcceleration(ndim=cfg.ndim, q=_q(cfg.accel_psd_m2s3))
     if cfg.model == "ct":
-        return CoordinatedTurn(q_accel=q, q_turn=cfg.q_turn_radps)
-    raise ConfigError(f"unknown motion model {cfg.model!r}")
+        return CoordinatedTurn(q_accel=_q(cfg.accel_psd_m2s3), q_turn=_q(cfg.turn_psd_rad2s3))
+    return imm_state_model(cfg)
+
+
+def imm_state_model(cfg: MotionConfig) -> MotionModel:
+    """The state space an IMM's modes share: the coordinated-turn state when a mode turns."""
+    raise ConfigError("IMM motion models need fusion.core.imm.build_imm (not merged yet)")
 
 
 def layout(cfg: MotionConfig) -> tuple[str, ...]:
     """Names of the state components, in order."""
-    if cfg.model == "ct":
+    if cfg.model == "ct" or (cfg.model == "imm" and any(m.model == "ct" for m in cfg.modes)):
         return ("x", "vx", "y", "vy", "omega")
     per = ("", "v", "a") if cfg.model == "ca" else ("", "v")
     return tuple(p + a for a in AXES[: cfg.ndim] for p in per)
@@ -39,38 +56,55 @@ def layout(cfg: MotionConfig) -> tuple[str, ...]:
 
 def make_filter(cfg: MotionConfig) -> Filter:
     """The track filter. Inputs are validated at intake, so the filters skip their checks."""
+    if cfg.model == "imm":
+        raise ConfigError("IMM filters need fusion.core.imm.build_imm (not merged yet)")
+    m = motion_model(cfg)
+    if cfg.filter == "ukf":
+        return UnscentedKalmanFilter(m, check=False)
+    return ExtendedKalmanFilter(m, check=False)
 
-    def one(m: MotionModel) -> Filter:
-        if cfg.filter == "ukf":
-            return UnscentedKalmanFilter(m, check=False)
-        return ExtendedKalmanFilter(m, check=False)
 
-    if cfg.model == "imm_cv":
-        p = cfg.imm_p_stay
-        return IMM(
-            [one(motion_model(cfg)), one(motion_model(cfg, q=cfg.q_high_mps2))],
-            [[p, 1 - p], [1 - p, p]],
-        )
-    return one(motion_model(cfg))
+def _is_imm(f: Filter) -> bool:
+    return isinstance(f, IMM)
 
 
 @dataclass(frozen=True)
 class SensorModel:
-    """The measurement models of one sensor, by measurement dimension."""
+    """The measurement models of one sensor, by measurement dimension, with the default noise
+    (None where the configuration gives none: then every message must carry its own)."""
 
     config: SensorConfig
+    index: int  # position of the sensor among the configured ones, sorted by id
     by_dim: dict[int, MeasurementModel]
+    default_R: dict[int, Array | None]
     ndim: int
+
+    @property
+    def is_cartesian(self) -> bool:
+        return isinstance(self.config, CartesianSensorConfig)
 
     def model(self, m: int) -> MeasurementModel | None:
         return self.by_dim.get(m)
 
+    def covers(self, pos: Array) -> np.ndarray | None:
+        """Which positions (N, d) lie in the declared coverage; None without a declared one."""
+        c = self.config
+        if c.max_range_m is None and not c.region_m:
+            return None
+        ok = np.ones(pos.shape[0], dtype=bool)
+        if c.max_range_m is not None:
+            origin = np.asarray(c.position_m or [0.0] * self.ndim)
+            ok &= np.sum((pos - origin) ** 2, axis=1) <= c.max_range_m**2
+        if c.region_m:
+            box = np.asarray(c.region_m).reshape(self.ndim, 2)
+            ok &= ((pos >= box[:, 0]) & (pos <= box[:, 1])).all(axis=1)
+        return ok
+
     def position_and_var(self, z: Array, R: Array) -> tuple[Array, Array]:
         """The measured point in world coordinates and a per-axis variance bounding its spread."""
-        if self.config.kind == "cartesian":
+        if self.is_cartesian:
             return z, np.diagonal(R).copy()
-        model = self.by_dim[z.shape[0]]
-        p = model.position(z)
+        p = self.by_dim[z.shape[0]].position(z)
         r = z[0]
         var = R[0, 0] + r * r * R[1, 1]
         if self.ndim == 3:
@@ -79,10 +113,9 @@ class SensorModel:
 
     def position_cov(self, z: Array, R: Array) -> Array:
         """Covariance of the measured point, J R J' with J = d position / d (range, angles)."""
-        if self.config.kind == "cartesian":
+        if self.is_cartesian:
             return R
-        head = self.config.heading_rad
-        r, a = z[0], z[1] + head
+        r, a = z[0], z[1] + self.config.heading_rad
         if self.ndim == 2:
             J = np.array([[np.cos(a), -r * np.sin(a)], [np.sin(a), r * np.cos(a)]])
             return J @ R[:2, :2] @ J.T
@@ -94,33 +127,41 @@ class SensorModel:
         return J @ R[:3, :3] @ J.T
 
 
+def _radar_R(s: RadarSensorConfig, ndim: int, range_rate: bool) -> Array | None:
+    stds = [s.range_std_m, s.bearing_std_rad] + ([s.elevation_std_rad] if ndim == 3 else [])
+    if range_rate:
+        stds.append(s.range_rate_std_mps)
+    if any(v is None for v in stds):
+        return None
+    return np.diag(np.square(np.asarray(stds, dtype=np.float64)))
+
+
 def sensor_models(cfg: TrackerConfig, motion: MotionModel) -> dict[str, SensorModel]:
     d = cfg.motion.ndim
     n = motion.ndim_state
     pos_idx, vel_idx = motion.position_indices, motion.velocity_indices
     out: dict[str, SensorModel] = {}
-    for s in cfg.sensors:
-        where = np.asarray(s.position_m or [0.0] * d, dtype=np.float64)
+    for index, s in enumerate(sorted(cfg.sensors, key=lambda s: s.id)):
         by_dim: dict[int, MeasurementModel] = {}
-        if s.kind == "cartesian":
-            by_dim[d] = CartesianPosition(ndim_state=n, indices=pos_idx, R=np.square(s.std_m))
-        elif d == 2:
-            base = [s.range_std_m**2, s.bearing_std_rad**2]
-            for rr in (False, True):
-                R = base + ([s.range_rate_std_mps**2] if rr else [])
-                by_dim[len(R)] = Radar2D(
-                    R=R, position=where, heading_rad=s.heading_rad, pos_idx=pos_idx[:2],  # type: ignore[arg-type]
-                    vel_idx=vel_idx[:2], range_rate=rr, ndim_state=n,  # type: ignore[arg-type]
-                )
+        default: dict[int, Array | None] = {}
+        if isinstance(s, CartesianSensorConfig):
+            if s.position_m or s.heading_rad:
+                raise ConfigError(f"sensor {s.id}: a pose for a Cartesian sensor is not supported yet; "
+                                  "give its measurements in the world frame and remove position_m/heading_rad")
+            R = None if s.std_m is None else np.diag(np.square(np.asarray(s.std_m, dtype=np.float64)))
+            by_dim[d] = CartesianPosition(ndim_state=n, indices=pos_idx, R=np.eye(d) if R is None else R)
+            default[d] = R
         else:
-            base = [s.range_std_m**2, s.bearing_std_rad**2, s.elevation_std_rad**2]
+            where = np.asarray(s.position_m or [0.0] * d, dtype=np.float64)
+            cls = Radar2D if d == 2 else Radar3D
             for rr in (False, True):
-                R = base + ([s.range_rate_std_mps**2] if rr else [])
-                by_dim[len(R)] = Radar3D(
-                    R=R, position=where, heading_rad=s.heading_rad, pos_idx=pos_idx,  # type: ignore[arg-type]
-                    vel_idx=vel_idx, range_rate=rr, ndim_state=n,  # type: ignore[arg-type]
-                )
-        out[s.id] = SensorModel(s, by_dim, d)
+                R = _radar_R(s, d, rr)
+                m = d + rr
+                by_dim[m] = cls(R=np.eye(m) if R is None else R, position=where, heading_rad=s.heading_rad,
+                                pos_idx=pos_idx[:d], vel_idx=vel_idx[:d], range_rate=rr,  # type: ignore[arg-type]
+                                ndim_state=n)
+                default[m] = R
+        out[s.id] = SensorModel(s, index, by_dim, default, d)
     return out
 
 
@@ -130,6 +171,6 @@ def initial_covariance_diag(cfg: TrackerConfig, n: int, motion: MotionModel) -> 
     diag[list(motion.velocity_indices)] = cfg.init.velocity_std_mps**2
     if cfg.motion.model == "ca":
         diag[[i + 1 for i in motion.velocity_indices]] = cfg.init.acceleration_std_mps2**2
-    if cfg.motion.model == "ct":
+    if n == 5 and layout(cfg.motion)[-1] == "omega":
         diag[4] = cfg.init.turn_rate_std_radps**2
     return diag

@@ -1,9 +1,13 @@
 """Tracks and the immutable set of them that the tracker checkpoints.
 
 A TrackSet is never modified: each scan builds a new one, so a checkpoint is a reference and
-rewinding for a late measurement costs nothing. Beside the Track records it holds arrays
-(position, velocity and their variances per axis at each track's own time, lifecycle
-counters) so that gating and the lifecycle sweep are vectorised over tracks.
+rewinding for a late measurement costs nothing. Beside the Track records it holds arrays, one
+row per track, so that gating and the lifecycle are vectorised over tracks:
+  pos, vel (N, d) and the per-axis variances vpp, vpv, vvv at each track's own time t_ns;
+  status, hits; chances (scans of sensors that could have seen it, since its birth), misses
+  (such chances in a row without a hit) and seen_by (N, S): which sensors have updated it.
+The lifecycle counters live only in the arrays: a scan that changes them for every covered
+track builds no Track objects.
 """
 
 from __future__ import annotations
@@ -42,47 +46,47 @@ def track_id_for(sensor_id: str, seq: int, t_ns: int) -> int:
 
 @dataclass(frozen=True, slots=True)
 class Track:
-    """One track: its posterior at its last update (state.t_ns) and its lifecycle counters."""
+    """One track: its posterior at its last update (state.t_ns), its status and hit count."""
 
     id: int
     state: GaussianState | IMMState
     status: Status
     hits: int
-    birth_scan: int
-    last_hit_scan: int
     birth_t_ns: int
     origin: tuple[str, int]  # (sensor_id, seq) of the measurement that started it
+    last: tuple[str, int]  # (sensor_id, seq) of the measurement that last updated it
+
+
+@dataclass(frozen=True, slots=True)
+class Rows:
+    """Where the arrays' columns come from: the state's position and velocity components, and
+    the number of sensors (columns of seen_by)."""
+
+    pos_idx: tuple[int, ...]
+    vel_idx: tuple[int, ...]
+    n_sensors: int
+
+
+ARRAY_FIELDS = ("ids", "pos", "vel", "vpp", "vpv", "vvv", "t_ns", "status", "hits", "chances", "misses", "seen_by")
+COUNTERS = ("chances", "misses", "seen_by")
 
 
 class TrackSet:
-    """An immutable, ordered set of tracks with vectorised views for gating."""
+    """An immutable, ordered set of tracks with vectorised views for gating and the lifecycle."""
 
-    __slots__ = (
-        "_index",
-        "birth_scan",
-        "hits",
-        "ids",
-        "last_hit_scan",
-        "pos",
-        "status",
-        "t_ns",
-        "tracks",
-        "vel",
-        "vpp",
-        "vpv",
-        "vvv",
-    )
+    __slots__ = ("_index", "chances", "hits", "ids", "misses", "pos", "rows", "seen_by", "status", "t_ns",
+                 "tracks", "vel", "vpp", "vpv", "vvv")
 
-    def __init__(self, tracks: tuple[Track, ...], arrays: dict[str, np.ndarray] | None, *,
-                 pos_idx: tuple[int, ...], vel_idx: tuple[int, ...]) -> None:
+    def __init__(self, tracks: tuple[Track, ...], arrays: dict[str, np.ndarray] | None, rows: Rows) -> None:
         self.tracks = tracks
+        self.rows = rows
         if arrays is None:
-            arrays = _rows(tracks, pos_idx, vel_idx)
+            arrays = _rows(tracks, rows)
         self.ids = arrays["ids"]
         self.pos, self.vel = arrays["pos"], arrays["vel"]
         self.vpp, self.vpv, self.vvv = arrays["vpp"], arrays["vpv"], arrays["vvv"]
         self.t_ns, self.status, self.hits = arrays["t_ns"], arrays["status"], arrays["hits"]
-        self.birth_scan, self.last_hit_scan = arrays["birth_scan"], arrays["last_hit_scan"]
+        self.chances, self.misses, self.seen_by = arrays["chances"], arrays["misses"], arrays["seen_by"]
         self._index: dict[int, int] | None = None
 
     def __len__(self) -> int:
@@ -103,55 +107,57 @@ class TrackSet:
         var = self.vpp + 2.0 * dt * self.vpv + dt * dt * self.vvv + q2 * dt**3 / 3.0
         return self.pos + self.vel * dt, np.maximum(var, 0.0)
 
-    def derive(self, replace: dict[int, Track], born: list[Track], delete: np.ndarray | None,
-               *, pos_idx: tuple[int, ...], vel_idx: tuple[int, ...]) -> TrackSet:
-        """A new set: rows `replace` (by index) swapped, `born` appended, rows where `delete`
-        is true removed. Only the changed rows are recomputed."""
+    def derive(self, *, replace: dict[int, Track] | None = None, counters: dict[str, np.ndarray] | None = None,
+               delete: np.ndarray | None = None, born: tuple[Track, ...] = (), born_sensor: int = 0) -> TrackSet:
+        """A new set: rows `replace` (by index) swapped, the lifecycle `counters` replaced,
+        rows where `delete` is true removed, then `born` appended (first seen by sensor
+        `born_sensor`). Only the changed rows are recomputed."""
         tracks = list(self.tracks)
-        arr = {k: v.copy() for k, v in self.arrays().items()} if (replace or delete is not None) else self.arrays()
+        arr = self.arrays()
         if replace:
+            arr = {k: (v if k in COUNTERS else v.copy()) for k, v in arr.items()}
             idx = np.fromiter(replace.keys(), dtype=np.intp, count=len(replace))
             new = tuple(replace.values())
-            for i, t in zip(idx, new, strict=True):
+            for i, t in zip(idx.tolist(), new, strict=True):
                 tracks[i] = t
-            r = _rows(new, pos_idx, vel_idx)
+            r = _rows(new, self.rows)
             for k in ARRAY_FIELDS:
-                arr[k][idx] = r[k]
+                if k not in COUNTERS:
+                    arr[k][idx] = r[k]
+        if counters:
+            arr = {**arr, **counters}
+        if delete is not None and delete.any():
+            keep = ~delete
+            tracks = [t for t, k in zip(tracks, keep.tolist(), strict=True) if k]
+            arr = {k: v[keep] for k, v in arr.items()}
         if born:
             tracks.extend(born)
-            r = _rows(tuple(born), pos_idx, vel_idx)
+            r = _rows(born, self.rows)
+            r["seen_by"][:, born_sensor] = True
             arr = {k: np.concatenate([arr[k], r[k]]) for k in ARRAY_FIELDS}
-        if delete is not None and delete.any():
-            keep = ~np.concatenate([delete, np.zeros(len(born), dtype=bool)])
-            tracks = [t for t, k in zip(tracks, keep, strict=True) if k]
-            arr = {k: v[keep] for k, v in arr.items()}
-        return TrackSet(tuple(tracks), arr, pos_idx=pos_idx, vel_idx=vel_idx)
+        return TrackSet(tuple(tracks), arr, self.rows)
 
 
-ARRAY_FIELDS = ("ids", "pos", "vel", "vpp", "vpv", "vvv", "t_ns", "status", "hits", "birth_scan", "last_hit_scan")
-
-
-def _rows(tracks: tuple[Track, ...], pos_idx: tuple[int, ...], vel_idx: tuple[int, ...]) -> dict[str, np.ndarray]:
+def _rows(tracks: tuple[Track, ...], rows: Rows) -> dict[str, np.ndarray]:
+    """Array rows of new tracks; the lifecycle counters start at a birth's values (one chance,
+    one hit, no misses, seen by nobody yet: `derive` marks the birth sensor)."""
     n = len(tracks)
-    d = len(pos_idx)
+    d = len(rows.pos_idx)
+    zi = np.zeros(n, dtype=np.int64)
+    out = {"ids": zi, "pos": np.zeros((n, d)), "vel": np.zeros((n, d)), "vpp": np.zeros((n, d)),
+           "vpv": np.zeros((n, d)), "vvv": np.zeros((n, d)), "t_ns": zi, "status": zi.astype(np.int8),
+           "hits": zi, "chances": np.ones(n, dtype=np.int64), "misses": zi.copy(),
+           "seen_by": np.zeros((n, rows.n_sensors), dtype=bool)}
     if n == 0:
-        z = np.zeros((0, d))
-        zi = np.zeros(0, dtype=np.int64)
-        return {"ids": zi, "pos": z, "vel": z, "vpp": z, "vpv": z, "vvv": z, "t_ns": zi,
-                "status": zi.astype(np.int8), "hits": zi, "birth_scan": zi, "last_hit_scan": zi}
+        return out
     X = np.stack([t.state.x for t in tracks])
     P = np.stack([t.state.P for t in tracks])
-    pi, vi = np.array(pos_idx), np.array(vel_idx)
-    return {
-        "ids": np.fromiter((t.id for t in tracks), dtype=np.int64, count=n),
-        "pos": X[:, pi],
-        "vel": X[:, vi],
-        "vpp": P[:, pi, pi],
-        "vpv": P[:, pi, vi],
-        "vvv": P[:, vi, vi],
-        "t_ns": np.fromiter((t.state.t_ns for t in tracks), dtype=np.int64, count=n),
-        "status": np.fromiter((t.status for t in tracks), dtype=np.int8, count=n),
-        "hits": np.fromiter((t.hits for t in tracks), dtype=np.int64, count=n),
-        "birth_scan": np.fromiter((t.birth_scan for t in tracks), dtype=np.int64, count=n),
-        "last_hit_scan": np.fromiter((t.last_hit_scan for t in tracks), dtype=np.int64, count=n),
-    }
+    pi, vi = np.array(rows.pos_idx), np.array(rows.vel_idx)
+    out.update(
+        ids=np.fromiter((t.id for t in tracks), dtype=np.int64, count=n),
+        pos=X[:, pi], vel=X[:, vi], vpp=P[:, pi, pi], vpv=P[:, pi, vi], vvv=P[:, vi, vi],
+        t_ns=np.fromiter((t.state.t_ns for t in tracks), dtype=np.int64, count=n),
+        status=np.fromiter((t.status for t in tracks), dtype=np.int8, count=n),
+        hits=np.fromiter((t.hits for t in tracks), dtype=np.int64, count=n),
+    )
+    return out

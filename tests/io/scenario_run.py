@@ -6,10 +6,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fusion.config import LifecycleConfig, MotionConfig, SensorConfig, TrackerConfig
+from fusion.config import CartesianSensorConfig, LifecycleConfig, MotionConfig, TrackerConfig
 from fusion.scenarios import reference
 from fusion.tracking.detection import Detection
-from fusion.tracking.tracker import Estimate, StepResult, Tracker
+from fusion.tracking.results import Estimate, StepResult
+from fusion.tracking.tracker import Tracker
 
 
 @dataclass
@@ -23,8 +24,8 @@ def maneuver_run(*, seed: int = 3) -> tuple[Tracker, list[Detection], dict[int, 
     """maneuver2d of scenarios.md as one Cartesian sensor feeding the tracker."""
     ref = reference("maneuver2d", seed=seed)
     cfg = TrackerConfig(
-        sensors=[SensorConfig(id="pos", kind="cartesian", std_m=[0.1, 0.1])],
-        motion=MotionConfig(q_mps2=0.05),
+        sensors=[CartesianSensorConfig(id="pos", std_m=[0.1, 0.1])],
+        motion=MotionConfig(accel_psd_m2s3=0.0025),
         lifecycle=LifecycleConfig(confirm_m=2, confirm_n=3),
     )
     dets = [Detection.of("pos", int(t), k, z) for k, (t, z) in enumerate(zip(ref.t_ns, ref.z, strict=True))]

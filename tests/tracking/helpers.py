@@ -7,7 +7,8 @@ from collections.abc import Iterable
 import numpy as np
 
 from fusion.config import LifecycleConfig, MotionConfig, TimeConfig, TrackerConfig
-from fusion.tracking.tracker import Estimate, StepResult, Tracker
+from fusion.tracking.results import Estimate, StepResult
+from fusion.tracking.tracker import Tracker
 from tests.tracking.streams import Sensor
 
 EstimateKey = tuple[int, int, str]

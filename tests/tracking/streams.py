@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fusion.config import SensorConfig
+from fusion.config import CartesianSensorConfig, RadarSensorConfig, SensorConfig
 from fusion.tracking.detection import Detection
 
 NS_PER_S = 1_000_000_000
@@ -72,8 +72,8 @@ class Sensor:
 
     def config(self) -> SensorConfig:
         if self.kind == "cartesian":
-            return SensorConfig(id=self.id, kind="cartesian", std_m=[self.std_m, self.std_m])
-        return SensorConfig(id=self.id, kind="radar", position_m=list(self.position_m),
+            return CartesianSensorConfig(id=self.id, std_m=[self.std_m, self.std_m])
+        return RadarSensorConfig(id=self.id, position_m=list(self.position_m),
                             range_std_m=self.range_std_m, bearing_std_rad=self.bearing_std_rad)
 
     def measure(self, p: np.ndarray, rng: np.random.Generator) -> np.ndarray:

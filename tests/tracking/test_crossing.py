@@ -75,7 +75,7 @@ def score(n_targets: int, clutter_mean: float, seed: int) -> dict[str, float]:
     swaps = sum(h in owner and owner[h] != i for i, hs in enumerate(held) for h in hs)
     return {"held": held_frac, "dominant": dominant, "changes": changes, "swaps": swaps,
             "ospa_mean": float(np.mean(ospas)),
-            "ospa_p90": float(np.quantile(ospas, 0.9)), "applied": tracker.counts["applied"]}
+            "ospa_p90": float(np.quantile(ospas, 0.9)), "applied": tracker.counts.applied}
 
 
 @pytest.mark.parametrize(("n_targets", "clutter_mean", "seed"), CASES, ids=[f"{n}tgt-clutter{c:g}-seed{s}"

@@ -64,7 +64,7 @@ def test_imm_tracks_through_a_manoeuvre_with_mode_probabilities(seed: int) -> No
 
 @pytest.mark.parametrize("seed", [71, 72], ids=["seed71", "seed72"])
 def test_ukf_tracker_matches_the_ekf_on_radar(seed: int) -> None:
-    motion = dict(model="cv", q_mps2=1.0)
+    motion = dict(model="cv", accel_psd_m2s3=1.0)
     _, ukf_consumer, ukf_err = manoeuvring_run(MotionConfig(filter="ukf", **motion), seed, sensors=(RADAR,))
     _, _, ekf_err = manoeuvring_run(MotionConfig(filter="ekf", **motion), seed, sensors=(RADAR,))
     assert all(e.mode_probabilities is None for e in ukf_consumer.latest.values())

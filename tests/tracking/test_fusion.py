@@ -26,7 +26,7 @@ from tests.tracking.streams import NS_PER_S, TICK_NS, Labeled, Sensor, Truth, co
 CART = Sensor("cart", "cartesian", period_s=1.0, std_m=5.0)
 RADAR = Sensor("radar", "radar", period_s=1.0, offset_s=0.5, range_std_m=5.0, bearing_std_rad=0.005)
 SEEDS = [1, 2, 3]
-Q_MPS2 = 0.3  # the truth is exactly constant-velocity: a small process noise lets the filter average
+ACCEL_PSD = 0.09  # the truth is exactly constant-velocity: a small process noise lets the filter average
 # At the default gate (0.999) one measurement in a thousand falls outside it; in a 240-update run
 # that happens (seed 3, radar alone, t = 68.5 s): the outlier starts a tentative track whose wide
 # gate then wins the GNN assignment over the confirmed track, which coasts out. That is a gating
@@ -43,7 +43,7 @@ def one_target(seed: int) -> tuple[Truth, list[Labeled], list[Labeled]]:
 
 
 def run(sensors: list[Sensor], dets: list[Labeled], truth: Truth) -> tuple[float, Consumer, int]:
-    tracker = Tracker(TrackerConfig(sensors=[s.config() for s in sensors], motion=MotionConfig(q_mps2=Q_MPS2),
+    tracker = Tracker(TrackerConfig(sensors=[s.config() for s in sensors], motion=MotionConfig(accel_psd_m2s3=ACCEL_PSD),
                                     gate=GateConfig(probability=GATE_PROBABILITY)))
     consumer = Consumer()
     batches = list(scans(dets))

@@ -48,7 +48,7 @@ def test_confirmation_needs_m_hits_within_n_scans() -> None:
         z = [0.0, 0.0] if hit else [5000.0 + 1000.0 * k, 5000.0]  # a miss: a far clutter return drives the scan
         events += tr.process([Detection.of("cart", k * S // 2, k, z)]).events
     tid = track_id_for("cart", 0, 0)
-    assert ("deleted", tid, "not confirmed") in {(e.kind, e.track_id, e.detail) for e in events}
+    assert ("deleted", tid, "not confirmed") in {(e.kind, e.track_id, e.reason) for e in events}
     assert not any(e.kind == "confirmed" for e in events)
 
 
@@ -73,7 +73,7 @@ def test_isolated_clutter_tracks_die_tentative_within_n_scans() -> None:
             if ev.kind == "born":
                 born_scan[ev.track_id] = k
             elif ev.kind == "deleted":
-                deleted[ev.track_id] = (k, ev.detail)
+                deleted[ev.track_id] = (k, ev.reason)
             elif ev.kind == "confirmed":
                 confirmed.add(ev.track_id)
     assert confirmed == {target_tid}
@@ -118,7 +118,7 @@ def test_a_vanished_target_is_deleted_with_the_reason(lifecycle: LifecycleConfig
     lost = [ev for ev in deletions if owner.get(ev.track_id) == 0]
     assert len(lost) == 1, deletions
     ev = lost[0]
-    assert ev.detail == reason
+    assert ev.reason == reason
     last_hit_s = 9.5
     if deleted_after_s is not None:
         assert ev.t_ns == round((last_hit_s + deleted_after_s) * S)

@@ -23,15 +23,15 @@ def run_long(n_detections: int, *, seed: int, time: TimeConfig, lifecycle: Lifec
     peak = {"history": 0, "seen": 0, "tracks": 0, "scan": 0}
     outcomes: dict[str, int] = {}
     window: list[int] = []  # detections per scan over the last scans, for the seen bound
-    while tr.counts["received"] < n_detections:
+    while tr.counts.received < n_detections:
         batch = next(stream)
         result = tr.process(batch)
         for a in result.associations:
             outcomes[a.outcome] = outcomes.get(a.outcome, 0) + 1
         window = (window + [len(batch)])[-(round(LAG_S / PERIOD_S) + 1):]
-        assert len(tr._seen) <= sum(window)
-        peak["history"] = max(peak["history"], tr.history_len)
-        peak["seen"] = max(peak["seen"], len(tr._seen))
+        assert tr.intake.seen_len <= sum(window)
+        peak["history"] = max(peak["history"], len(tr.history))
+        peak["seen"] = max(peak["seen"], tr.intake.seen_len)
         peak["tracks"] = max(peak["tracks"], len(tr.tracks))
         peak["scan"] = max(peak["scan"], len(batch))
     return tr, peak, outcomes
@@ -44,7 +44,7 @@ def check_bounded(n_detections: int, seed: int) -> None:
     assert peak["seen"] <= scans_in_window * peak["scan"], peak
     assert peak["tracks"] <= 3 * N_TARGETS, peak  # the targets plus short-lived clutter tracks
     assert len(tr.confirmed()) >= N_TARGETS - 2
-    assert tr.counts["received"] == tr.counts["applied"] >= n_detections
+    assert tr.counts.received == tr.counts.applied >= n_detections
 
 
 @pytest.mark.parametrize("seed", [31], ids=["seed31"])
@@ -67,7 +67,7 @@ def test_full_tracker_refuses_births_and_counts_them() -> None:
     lc = LifecycleConfig(max_tracks=5)
     tr, peak, outcomes = run_long(3_000, seed=34, time=TimeConfig(lag_s=LAG_S), lifecycle=lc)
     assert peak["tracks"] == 5
-    refused = tr.counts["births_refused_capacity"]
+    refused = tr.counts.births_refused_capacity
     assert refused > 0
     assert outcomes.get("capacity", 0) == refused
     assert outcomes.get("updated", 0) > 0

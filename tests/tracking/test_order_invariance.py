@@ -64,7 +64,7 @@ def test_reference_stream_is_nontrivial() -> None:
     assert any(d.origin < 0 for d in dets) and {d.det.sensor_id for d in dets} == {"cart", "radar"}
     _tracks, latest, tracker = reference()
     assert len(tracker.confirmed()) == 3, "the reference run holds the three targets"
-    assert tracker.counts["applied"] == len(dets)
+    assert tracker.counts.applied == len(dets)
     assert {k[2] for k in latest} == {"cart", "radar"}
 
 
@@ -88,8 +88,8 @@ def test_arrival_order_does_not_change_the_result(draw: tuple[list[int], list[in
     delays_ms, batch_sizes = draw
     tracker, consumer = run(arrival_order(delays_ms), batch_sizes)
     ref_tracks, ref_latest, _ = reference()
-    assert tracker.counts["applied"] == len(stream())
-    assert sum(v for k, v in tracker.counts.items() if k.startswith("refused_")) == 0
+    assert tracker.counts.applied == len(stream())
+    assert sum(tracker.counts.refused.values()) == 0
     assert track_snapshot(tracker) == ref_tracks
     latest = consumer.snapshot()
     assert latest.keys() == ref_latest.keys()
@@ -101,8 +101,8 @@ def test_a_fixed_delay_draw_exercises_replays_and_revisions() -> None:
     rng = np.random.default_rng(SEED + 1)
     delays = rng.integers(0, LAG_MS, size=len(stream())).tolist()
     tracker, consumer = run(arrival_order(delays), [3])
-    assert tracker.counts["replays"] > 10
-    assert tracker.counts["late_applied"] > 10
+    assert tracker.counts.replays > 10
+    assert tracker.counts.late_applied > 10
     assert consumer.n_revised > 0
     assert track_snapshot(tracker) == reference()[0]
     assert consumer.snapshot() == reference()[1]

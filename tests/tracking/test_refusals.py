@@ -2,13 +2,12 @@
 
 from __future__ import annotations
 
-from collections import Counter
-
 import numpy as np
 import pytest
 
 from fusion.config import TimeConfig
 from fusion.tracking.detection import Detection, Reason
+from fusion.tracking.results import Counts
 from tests.tracking.helpers import Consumer, make_tracker
 from tests.tracking.streams import NS_PER_S, Sensor, constant_velocity, detect, in_order
 
@@ -30,8 +29,8 @@ def good_stream(seed: int = SEED) -> list[Detection]:
     return [d.det for d in in_order(detect(truth, CART, rng=rng), detect(truth, RADAR, rng=rng))]
 
 
-def refused_total(counts: Counter[str]) -> int:
-    return sum(v for k, v in counts.items() if k.startswith("refused_"))
+def refused_total(counts: Counts) -> int:
+    return sum(counts.refused.values())
 
 
 def test_late_measurement_inside_the_window_replays_and_revises() -> None:
@@ -41,7 +40,7 @@ def test_late_measurement_inside_the_window_replays_and_revises() -> None:
     tr, consumer = tracker(), Consumer()
     for d in first:
         consumer.take(tr.process([d]))
-    assert tr.counts["replays"] == 0
+    assert tr.counts.replays == 0
     result = tr.process([late])
     consumer.take(result)
     assert result.applied == 1 and not result.refused
@@ -50,7 +49,7 @@ def test_late_measurement_inside_the_window_replays_and_revises() -> None:
     assert replay.trigger == (("radar", late.seq),)
     assert replay.from_t_ns == late.t_ns
     assert replay.n_scans == 4  # radar 5.25 (it held the other target's return), cart 5.5, radar 5.75, cart 6.0
-    assert tr.counts["replays"] == 1 and tr.counts["late_applied"] == 1 and tr.counts["replayed_scans"] == 4
+    assert tr.counts.replays == 1 and tr.counts.late_applied == 1 and tr.counts.replayed_scans == 4
     revised = [e for e in result.estimates if e.revision > 0]
     assert revised, "the late radar return changes the later estimates: they come again with revision 1"
     assert {e.t_ns for e in revised} <= {5 * S + S // 2, 5 * S + 3 * S // 4, 6 * S}
@@ -95,26 +94,27 @@ BAD = [
     ("future", Detection.of("cart", 3 * S + 10 * S + 1, 911, [0.0, 0.0]), Reason.FUTURE),
     ("too-late", Detection.of("cart", 3 * S - 2 * S - 1, 912, [0.0, 0.0]), Reason.TOO_LATE),
     ("duplicate", Detection.of("cart", 3 * S, 6, [0.0, 0.0]), Reason.DUPLICATE),
-    ("duplicate-other-time", Detection.of("cart", 2 * S, 6, [1.0, 0.0]), Reason.DUPLICATE),
     ("redelivered-after-window", Detection.of("cart", 0, 0, [0.0, 0.0]), Reason.TOO_LATE),
 ]
 
 
 def primed():
-    """A tracker that has seen measurements up to t = 3 s (newest time exactly 3 s)."""
+    """A tracker whose clock reads 3 s: measurements every 0.5 s up to 3 s, and a second one at
+    3 s (the clock believes a time once two measurements vouch for it: clock_outliers = 1)."""
     tr = tracker()
-    tr.process([Detection.of("cart", k * S // 2, k, [0.0, 0.0]) for k in range(7)])
-    assert tr.newest_t_ns == 3 * S
+    tr.process([Detection.of("cart", k * S // 2, k, [0.0, 0.0]) for k in range(7)]
+               + [Detection.of("radar", 3 * S, 0, [500.0, 0.0])])
+    assert tr.now_ns == 3 * S and tr.horizon_ns == 1 * S
     return tr
 
 
 @pytest.mark.parametrize(("d", "reason"), [(d, r) for _, d, r in BAD], ids=[i for i, _, _ in BAD])
 def test_bad_measurement_is_refused_with_its_reason(d: Detection, reason: Reason) -> None:
     tr = primed()
-    before = Counter(tr.counts)
+    before = tr.counts
     assert refusal_of(tr, d) == reason
-    assert tr.counts[f"refused_{reason.value}"] == before[f"refused_{reason.value}"] + 1
-    assert tr.counts["applied"] == before["applied"]
+    assert tr.counts.refused[reason] == before.refused.get(reason, 0) + 1
+    assert tr.counts.applied == before.applied
 
 
 @pytest.mark.parametrize(
@@ -123,28 +123,32 @@ def test_bad_measurement_is_refused_with_its_reason(d: Detection, reason: Reason
         (Detection.of("cart", 3 * S + 10 * S, 950, [0.0, 0.0]), "exactly future_s ahead"),
         (Detection.of("cart", 3 * S - 2 * S + S // 2, 951, [0.0, 0.0]), "1.5 s late: inside the window"),
         (Detection.of("cart", 3 * S, 952, [1.0, 1.0], [[2.0, 0.5], [0.5, 1.0]]), "own positive definite R"),
-        (Detection.of("radar", 3 * S, 0, [400.0, 0.2]), "seq 0 of another sensor"),
+        (Detection.of("radar", 2 * S, 0, [400.0, 0.2]), "seq 0 of another sensor"),
+        (Detection.of("cart", 2 * S, 6, [1.0, 0.0]), "seq 6 again at another time: a restarted counter"),
     ],
-    ids=["future-boundary", "late-in-window", "own-R", "same-seq-other-sensor"],
+    ids=["future-boundary", "late-in-window", "own-R", "same-seq-other-sensor", "same-seq-other-time"],
 )
 def test_edge_cases_that_are_accepted(d: Detection, why: str) -> None:
     tr = primed()
     assert refusal_of(tr, d) is None, why
 
 
-def test_window_follows_the_newest_time_and_pruned_history() -> None:
-    tr = primed()  # newest 3 s, lag 2 s
+def test_window_follows_the_clock_and_pruned_history() -> None:
+    tr = primed()  # clock 3 s, lag 2 s: the window starts at 1 s
     assert refusal_of(tr, Detection.of("cart", 1 * S, 100, [0.0, 0.0])) is None  # exactly lag_s behind
-    assert refusal_of(tr, Detection.of("cart", 6 * S, 101, [0.0, 0.0])) is None  # newest -> 6 s
-    assert refusal_of(tr, Detection.of("cart", 3 * S + S // 2, 102, [0.0, 0.0])) is Reason.TOO_LATE
-    assert refusal_of(tr, Detection.of("cart", 4 * S - 1, 103, [0.0, 0.0])) is Reason.TOO_LATE
-    assert refusal_of(tr, Detection.of("cart", 4 * S, 104, [0.0, 0.0])) is None  # exactly lag_s behind again
+    assert refusal_of(tr, Detection.of("cart", 6 * S, 101, [0.0, 0.0])) is None  # one witness of 6 s...
+    assert tr.now_ns == 3 * S  # ...does not move the clock
+    assert refusal_of(tr, Detection.of("cart", 6 * S, 102, [10.0, 0.0])) is None  # a second one does
+    assert tr.now_ns == 6 * S and tr.horizon_ns == 4 * S
+    assert refusal_of(tr, Detection.of("cart", 3 * S + S // 2, 103, [0.0, 0.0])) is Reason.TOO_LATE
+    assert refusal_of(tr, Detection.of("cart", 4 * S - 1, 104, [0.0, 0.0])) is Reason.TOO_LATE
+    assert refusal_of(tr, Detection.of("cart", 4 * S, 105, [0.0, 0.0])) is None  # exactly lag_s behind again
     # (cart, 100) left the window with its scan: it is now too late rather than a duplicate.
     assert refusal_of(tr, Detection.of("cart", 1 * S, 100, [0.0, 0.0])) is Reason.TOO_LATE
     assert refusal_of(tr, Detection.of("cart", 6 * S, 101, [0.0, 0.0])) is Reason.DUPLICATE
     c = tr.counts
-    assert c["received"] == c["applied"] + refused_total(c) == 7 + 7
-    assert (c["refused_too_late"], c["refused_duplicate"]) == (3, 1)
+    assert c.received == c.applied + refused_total(c) == 8 + 8
+    assert (c.refused[Reason.TOO_LATE], c.refused[Reason.DUPLICATE]) == (3, 1)
 
 
 def test_mixed_stream_counts_add_up_and_good_ones_are_applied() -> None:
@@ -190,9 +194,9 @@ def test_mixed_stream_counts_add_up_and_good_ones_are_applied() -> None:
         accepted = {(d.sensor_id, d.seq) for d, o in zip(batch, outcome[-len(batch):], strict=True) if o is None}
         assert accepted <= {(a.sensor_id, a.seq) for a in result.associations}
     c = tr.counts
-    assert c["received"] == len(start) + len(mixed)
-    assert c["received"] == c["applied"] + refused_total(c)
-    assert c["applied"] == len(good), "every good measurement is applied"
+    assert c.received == len(start) + len(mixed)
+    assert c.received == c.applied + refused_total(c)
+    assert c.applied == len(good), "every good measurement is applied"
     assert refused_total(c) == len(bad)
     assert [o for o in outcome if o is not None] == [r for _, r in mixed if r is not None]
     assert outcome == [r for _, r in mixed], "each input exactly once: applied if good, refused with its reason if bad"

@@ -1,0 +1,133 @@
+"""Checkpoints, rewinding, revisions and pruning: what makes late data exact.
+
+The history keeps, for every scan inside the window, its detections, the track set before it
+(a reference: track sets are immutable) and what it reported: the revision and signature of
+each estimate, its events and its tally. A late measurement rewinds to the checkpoint before
+its scan; the scans from there are run again and compared with what they reported before:
+  estimates: an unchanged estimate is not reported again; a changed one gets revision + 1;
+             one the scan no longer produces is retracted (revision + 1, status "retracted");
+  events:    a new event is reported; one the scan no longer produces is withdrawn
+             (retracted=True).
+So a consumer applying revisions and withdrawals ends up with the same estimates and events
+for any arrival order. Tallies are replaced, never added again: the counts of what the data
+did are the sum over committed and live scans.
+"""
+
+from __future__ import annotations
+
+import bisect
+from collections import Counter
+from dataclasses import dataclass, field
+
+from fusion.tracking.detection import Detection
+from fusion.tracking.results import Estimate, ScanKey, TrackEvent
+from fusion.tracking.trackset import TrackSet
+
+Revision = tuple[int, bytes, bool]  # (revision, signature, alive)
+
+
+@dataclass
+class Entry:
+    """One scan in the window."""
+
+    key: ScanKey
+    dets: tuple[Detection, ...]
+    before: TrackSet
+    emitted: dict[int, Revision] = field(default_factory=dict)  # track id -> latest reported
+    events: dict[tuple[str, int, int, str], TrackEvent] = field(default_factory=dict)
+    tally: Counter = field(default_factory=Counter)
+
+
+@dataclass(frozen=True)
+class Rewind:
+    """Where to start again: the track set to start from and the old entries of the scans to run."""
+
+    start: TrackSet
+    old: dict[ScanKey, Entry]
+    keys: list[ScanKey]  # every scan to run, in order: old ones and new ones
+
+
+class History:
+    def __init__(self) -> None:
+        self.entries: list[Entry] = []
+        self.keys: list[ScanKey] = []
+        self.committed: Counter = Counter()  # tallies of scans pruned from the window
+
+    def __len__(self) -> int:
+        return len(self.entries)
+
+    def rewind(self, new_keys: set[ScanKey], current: TrackSet) -> Rewind:
+        """Remove the entries from the earliest scan that new data touches, and say what to run."""
+        start = min(bisect.bisect_left(self.keys, k) for k in new_keys)
+        old = self.entries[start:]
+        keys = sorted(set(self.keys[start:]) | new_keys)
+        ts = old[0].before if old else current
+        del self.entries[start:]
+        del self.keys[start:]
+        return Rewind(ts, {e.key: e for e in old}, keys)
+
+    @property
+    def newest(self) -> ScanKey | None:
+        return self.keys[-1] if self.keys else None
+
+    def append(self, entry: Entry) -> None:
+        self.entries.append(entry)
+        self.keys.append(entry.key)
+
+    def prune(self, horizon_ns: int, max_scans: int) -> list[Entry]:
+        """Commit (drop) the scans before the horizon, and the oldest beyond max_scans."""
+        drop = 0
+        n = len(self.entries)
+        while drop < n and (self.keys[drop][0] < horizon_ns or n - drop > max_scans):
+            drop += 1
+        gone = self.entries[:drop]
+        for e in gone:
+            self.committed.update(e.tally)
+        del self.entries[:drop]
+        del self.keys[:drop]
+        return gone
+
+    def tally(self) -> Counter:
+        total = Counter(self.committed)
+        for e in self.entries:
+            total.update(e.tally)
+        return total
+
+
+def _signature(e: Estimate) -> bytes:
+    return e.x.tobytes() + e.P.tobytes() + e.status.encode()
+
+
+def revise(entry: Entry, prev: Entry | None, new: list[Estimate]) -> list[Estimate]:
+    """The estimates to report for a scan run (again): see the module docstring."""
+    old = prev.emitted if prev else {}
+    out: list[Estimate] = []
+    produced: set[int] = set()
+    for e in new:
+        sig = _signature(e)
+        produced.add(e.track_id)
+        o = old.get(e.track_id)
+        if o is not None and o[2] and o[1] == sig:
+            entry.emitted[e.track_id] = o
+            continue
+        rev = 0 if o is None else o[0] + 1
+        entry.emitted[e.track_id] = (rev, sig, True)
+        out.append(e.with_revision(rev))
+    for tid in sorted(old):
+        if tid in produced:
+            continue
+        rev, sig, alive = old[tid]
+        if alive:
+            rev += 1
+            out.append(Estimate.retraction((tid, entry.key[0], entry.key[1]), rev))
+        entry.emitted[tid] = (rev, sig, False)
+    return out
+
+
+def revise_events(entry: Entry, prev: Entry | None, new: list[TrackEvent]) -> list[TrackEvent]:
+    """The events to report for a scan run (again): new ones, and withdrawals of vanished ones."""
+    old = prev.events if prev else {}
+    entry.events = {ev.key: ev for ev in new}
+    out = [ev for ev in new if ev.key not in old]
+    out.extend(old[k].withdrawn() for k in sorted(old) if k not in entry.events)
+    return out

@@ -1,0 +1,137 @@
+"""Admission: is a detection valid, inside the time window, and new?
+
+One detection at a time, in arrival order, so the outcome never depends on how arrivals are
+batched:
+  1. validation against the configured sensors (shape, finiteness, range > 0, R symmetric
+     positive definite via fusion.core.checks; a default R where the message has none);
+  2. the clock: each valid detection i adds the offset o_i = t_i - a_i to a window of the last
+     `clock_samples` offsets (a_i its arrival time, 0 when unknown), and
+         now = a + the (k+1)-th largest offset in the window   (k = clock_outliers),
+         horizon = max over admissions of (now - lag_s).
+     So now follows the freshest data, but k wrong timestamps cannot push it (nor lock the
+     window); after a silence the arrival times (or, without them, k + 1 detections) move it on;
+  3. refused as future when t > now + future_s, as too_late when t < horizon (or before a scan
+     the history had to commit early), as duplicate when (sensor_id, seq, t_ns) was accepted
+     before.
+"""
+
+from __future__ import annotations
+
+import bisect
+from collections import deque
+from collections.abc import Mapping
+
+import numpy as np
+
+from fusion.config import TimeConfig
+from fusion.core.checks import as_covariance
+from fusion.core.timebase import NS_PER_S
+from fusion.errors import InputError
+from fusion.tracking.detection import Detection, Reason, Refusal
+from fusion.tracking.models import SensorModel
+from fusion.tracking.results import ScanKey
+
+Identity = tuple[str, int, int]  # (sensor_id, seq, t_ns)
+
+
+class StreamClock:
+    """now = a + the (outliers+1)-th largest of the last `samples` offsets t_i - a_i (see the
+    module docstring); with fewer offsets than that, the smallest."""
+
+    def __init__(self, samples: int, outliers: int) -> None:
+        self._window: deque[int] = deque(maxlen=samples)
+        self._sorted: list[int] = []
+        self._rank = outliers + 1
+
+    def observe(self, t_ns: int, arrival_ns: int | None) -> int:
+        """Add one detection's offset; return the clock at its arrival."""
+        a = 0 if arrival_ns is None else arrival_ns
+        if len(self._window) == self._window.maxlen:
+            old = self._window[0]
+            del self._sorted[bisect.bisect_left(self._sorted, old)]
+        o = t_ns - a
+        self._window.append(o)
+        bisect.insort(self._sorted, o)
+        return a + self._sorted[max(len(self._sorted) - self._rank, 0)]
+
+
+class Intake:
+    """Validation, the clock, the window and the duplicate set of one tracker."""
+
+    def __init__(self, sensors: Mapping[str, SensorModel], cfg: TimeConfig) -> None:
+        self.sensors = sensors
+        self.clock = StreamClock(cfg.clock_samples, cfg.clock_outliers)
+        self.lag_ns = round(cfg.lag_s * NS_PER_S)
+        self.future_ns = round(cfg.future_s * NS_PER_S)
+        self.now_ns: int | None = None  # the clock at the last admission
+        self.horizon_ns: int | None = None  # data before it is committed: too late
+        self.committed: ScanKey | None = None  # newest scan the history dropped
+        self._seen: set[Identity] = set()
+
+    def admit(self, d: Detection) -> tuple[Detection | None, Refusal | None]:
+        """The detection to track (its R filled in from the sensor's default when absent), or
+        the reason it is refused. An accepted detection is remembered for duplicates."""
+        d, bad = self.validate(d)
+        if bad is not None:
+            return None, bad
+        now = self.now_ns = self.clock.observe(d.t_ns, d.arrival_ns)
+        h = now - self.lag_ns
+        if self.horizon_ns is None or h > self.horizon_ns:
+            self.horizon_ns = h
+        if d.t_ns > now + self.future_ns:
+            return None, _no(d, Reason.FUTURE, f"{(d.t_ns - now) / 1e9:.3f} s ahead of the stream's clock")
+        if d.t_ns < self.horizon_ns:
+            return None, _no(d, Reason.TOO_LATE, f"{(self.horizon_ns - d.t_ns) / 1e9:.3f} s before the "
+                             "out-of-order window")
+        if self.committed is not None and (d.t_ns, d.sensor_id) <= self.committed:
+            return None, _no(d, Reason.TOO_LATE, "before a scan the history committed early (max_lag_scans)")
+        ident = (d.sensor_id, d.seq, d.t_ns)
+        if ident in self._seen:
+            return None, _no(d, Reason.DUPLICATE, f"seq {d.seq} of {d.sensor_id} at this time seen before")
+        self._seen.add(ident)
+        return d, None
+
+    def forget(self, dets: tuple[Detection, ...]) -> None:
+        """Detections of committed scans: nothing before the horizon is admitted, so their
+        identities need not be kept."""
+        for d in dets:
+            self._seen.discard((d.sensor_id, d.seq, d.t_ns))
+
+    def commit(self, key: ScanKey) -> None:
+        if self.committed is None or key > self.committed:
+            self.committed = key
+
+    @property
+    def seen_len(self) -> int:
+        return len(self._seen)
+
+    def validate(self, d: Detection) -> tuple[Detection, Refusal | None]:
+        sm = self.sensors.get(d.sensor_id)
+        if sm is None:
+            return d, _no(d, Reason.UNKNOWN_SENSOR, f"sensor {d.sensor_id!r} is not configured")
+        if not isinstance(d.t_ns, int) or not isinstance(d.seq, int) or d.seq < 0:
+            return d, _no(d, Reason.INVALID, "t_ns and seq must be integers, seq >= 0")
+        z = d.z
+        if z.ndim != 1 or sm.model(z.shape[0]) is None:
+            return d, _no(d, Reason.INVALID,
+                          f"z has shape {z.shape}; sensor {d.sensor_id} takes lengths {sorted(sm.by_dim)}")
+        if not np.isfinite(z).all():
+            return d, _no(d, Reason.INVALID, "z holds NaN or inf")
+        if not sm.is_cartesian and not z[0] > 0:
+            return d, _no(d, Reason.INVALID, f"range must be > 0, got {z[0]}")
+        m = z.shape[0]
+        if d.R is None:
+            R = sm.default_R[m]
+            if R is None:
+                return d, _no(d, Reason.INVALID, f"no noise: the message carries none and sensor {d.sensor_id} "
+                              "has no default in the configuration")
+            return Detection(d.sensor_id, d.t_ns, d.seq, z, R, d.arrival_ns), None
+        try:
+            R = as_covariance("R", d.R, m)
+        except InputError as e:
+            return d, _no(d, Reason.BAD_COVARIANCE, str(e))
+        return Detection(d.sensor_id, d.t_ns, d.seq, z, R, d.arrival_ns), None
+
+
+def _no(d: Detection, reason: Reason, detail: str) -> Refusal:
+    return Refusal(d.sensor_id, d.t_ns, d.seq, reason, detail)

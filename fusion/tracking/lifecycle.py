@@ -1,0 +1,77 @@
+"""Confirmation and deletion, in one place.
+
+A scan of sensor s is a chance for track i when s could have seen it: i's predicted position
+lies in s's declared coverage, or (without one) s has updated i before. Only chances count, so
+scans of other sensors, or a burst of returns elsewhere, never wear a track down.
+  hit:        hits += 1, chances += 1, misses = 0; a tentative track with hits >= M within its
+              first N chances is confirmed;
+  no hit:     a chance adds chances += 1, misses += 1;
+  deletion:   tentative with chances >= N and hits < M ("not confirmed"); confirmed with
+              misses > max_misses ("misses"); any track without an update for coast_s
+              ("coasted") or with a predicted position std above max_position_std_m
+              ("covariance").
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from fusion.config import LifecycleConfig
+from fusion.core.timebase import NS_PER_S
+from fusion.tracking.models import SensorModel
+from fusion.tracking.results import DeletionReason, EventKind, TrackEvent
+from fusion.tracking.trackset import Status, TrackSet
+
+
+@dataclass(frozen=True)
+class Sweep:
+    """The lifecycle's verdict on the tracks of one scan."""
+
+    counters: dict[str, np.ndarray]  # chances, misses, seen_by after the scan
+    delete: np.ndarray  # rows to delete
+    events: list[TrackEvent]
+
+
+class Lifecycle:
+    def __init__(self, cfg: LifecycleConfig, q2: float) -> None:
+        self.cfg = cfg
+        self.q2 = q2
+        self.coast_ns = round(cfg.coast_s * NS_PER_S)
+
+    def confirms(self, status: Status, hits: int, chances: int) -> bool:
+        """Does a hit that brings a track to `hits` in `chances` chances confirm it?"""
+        return status == Status.TENTATIVE and hits >= self.cfg.confirm_m and chances <= self.cfg.confirm_n
+
+    def born_status(self) -> Status:
+        return Status.CONFIRMED if self.cfg.confirm_m <= 1 else Status.TENTATIVE
+
+    def sweep(self, before: TrackSet, after: TrackSet, hit: np.ndarray, sensor: SensorModel, t_ns: int) -> Sweep:
+        """Counters and deletions after a scan of `sensor` at t_ns. `before` holds the tracks as
+        they were gated (their predicted positions decide coverage), `after` the same rows with
+        the hit tracks updated; `hit` marks the rows that took a measurement."""
+        cfg = self.cfg
+        s = sensor.index
+        ppos, _ = before.predicted_position(t_ns, self.q2)
+        declared = sensor.covers(ppos)
+        chance = hit | (before.seen_by[:, s] if declared is None else declared)
+        chances = after.chances + chance
+        misses = np.where(hit, 0, after.misses + chance)
+        seen_by = after.seen_by
+        if hit.any():
+            seen_by = seen_by.copy()
+            seen_by[hit, s] = True
+        _, pvar = after.predicted_position(t_ns, self.q2)
+        tent = after.status == Status.TENTATIVE
+        not_confirmed = tent & (chances >= cfg.confirm_n) & (after.hits < cfg.confirm_m)
+        missed = ~tent & (misses > cfg.max_misses)
+        coasted = (t_ns - after.t_ns) > self.coast_ns
+        too_wide = pvar.max(axis=1) > cfg.max_position_std_m**2 if pvar.size else np.zeros(len(after), bool)
+        delete = not_confirmed | missed | coasted | too_wide
+        events = []
+        for i in np.flatnonzero(delete).tolist():
+            why = (DeletionReason.NOT_CONFIRMED if not_confirmed[i] else DeletionReason.MISSES if missed[i]
+                   else DeletionReason.COASTED if coasted[i] else DeletionReason.COVARIANCE)
+            events.append(TrackEvent(EventKind.DELETED, int(after.ids[i]), t_ns, why))
+        return Sweep({"chances": chances, "misses": misses, "seen_by": seen_by}, delete, events)

@@ -1,0 +1,187 @@
+"""What the tracker reports: estimates, events, associations, replays, counts.
+
+Every report is a function of the accepted measurements, never of their arrival order, once
+revisions and retractions are applied the way a consumer applies them:
+- an Estimate is keyed by (track_id, t_ns, sensor_id); a higher revision replaces a lower one,
+  status "retracted" withdraws the key;
+- a TrackEvent is keyed by (kind, track_id, t_ns, reason); `retracted=True` withdraws it.
+Only Replay records and the arrival counts (replays, replayed scans, rescans, late_applied)
+describe how the data arrived, and they are named so.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from enum import StrEnum
+
+import numpy as np
+
+from fusion.core.checks import Array
+from fusion.tracking.detection import Reason, Refusal
+
+ScanKey = tuple[int, str]  # (t_ns, sensor_id): the processing order of scans
+EstimateKey = tuple[int, int, str]  # (track_id, t_ns, sensor_id)
+
+
+class EventKind(StrEnum):
+    BORN = "born"
+    CONFIRMED = "confirmed"
+    DELETED = "deleted"
+
+
+class DeletionReason(StrEnum):
+    """Why a track was deleted."""
+
+    NOT_CONFIRMED = "not confirmed"  # fewer than M hits in its first N chances
+    MISSES = "misses"  # more than max_misses chances in a row without a hit
+    COASTED = "coasted"  # no update for coast_s seconds
+    COVARIANCE = "covariance"  # predicted position spread above max_position_std_m
+
+
+class Outcome(StrEnum):
+    """What became of an accepted measurement in its scan."""
+
+    UPDATED = "updated"  # it updated a track
+    BORN = "born"  # it started a track
+    UNASSIGNED = "unassigned"  # it fell in a gate but another measurement won the track
+    CAPACITY = "capacity"  # no track could be started: max_tracks reached
+
+
+@dataclass(frozen=True, slots=True)
+class Estimate:
+    """A track's posterior after a scan, or its retraction (status "retracted", empty x and P).
+
+    prior_x, prior_P: the prediction to t_ns; y, S: innovation and its covariance; H: the
+    measurement Jacobian at the prior (the gain is K = prior_P H' S^-1). All None at a birth.
+    """
+
+    track_id: int
+    t_ns: int
+    sensor_id: str
+    seq: int  # the measurement that updated (or started) the track; -1 for a retraction
+    x: Array
+    P: Array
+    status: str  # "tentative" | "confirmed" | "retracted"
+    revision: int
+    nis: float | None
+    y: Array | None
+    S: Array | None
+    mode_probabilities: Array | None = None
+    meas_pos: Array | None = None  # world position of the measurement used (the association)
+    prior_x: Array | None = None
+    prior_P: Array | None = None
+    H: Array | None = None
+
+    @property
+    def key(self) -> EstimateKey:
+        return (self.track_id, self.t_ns, self.sensor_id)
+
+    def with_revision(self, revision: int) -> Estimate:
+        if revision == self.revision:
+            return self
+        return Estimate(self.track_id, self.t_ns, self.sensor_id, self.seq, self.x, self.P, self.status, revision,
+                        self.nis, self.y, self.S, self.mode_probabilities, self.meas_pos, self.prior_x,
+                        self.prior_P, self.H)
+
+    @classmethod
+    def retraction(cls, key: EstimateKey, revision: int) -> Estimate:
+        track_id, t_ns, sensor_id = key
+        return cls(track_id, t_ns, sensor_id, -1, np.empty(0), np.empty((0, 0)), "retracted", revision,
+                   None, None, None)
+
+
+@dataclass(frozen=True, slots=True)
+class TrackEvent:
+    """born | confirmed | deleted (with its reason), at the time of the scan that caused it.
+    retracted=True withdraws an event reported earlier (a replay no longer produces it)."""
+
+    kind: EventKind
+    track_id: int
+    t_ns: int
+    reason: DeletionReason | None = None
+    retracted: bool = False
+
+    @property
+    def key(self) -> tuple[str, int, int, str]:
+        return (self.kind.value, self.track_id, self.t_ns, "" if self.reason is None else self.reason.value)
+
+    def withdrawn(self) -> TrackEvent:
+        return TrackEvent(self.kind, self.track_id, self.t_ns, self.reason, True)
+
+
+@dataclass(frozen=True, slots=True)
+class MeasuredPoint:
+    """A newly accepted measurement, in world Cartesian coordinates (for recordings)."""
+
+    sensor_id: str
+    t_ns: int
+    seq: int
+    position: Array
+
+
+@dataclass(frozen=True, slots=True)
+class Association:
+    """What became of one accepted measurement in its scan, and the tracks in whose gate it fell."""
+
+    sensor_id: str
+    t_ns: int
+    seq: int
+    outcome: Outcome
+    track_id: int | None
+    nis: float | None
+    gated: tuple[int, ...]
+
+
+@dataclass(frozen=True, slots=True)
+class Replay:
+    """Late measurements rewound the tracker to from_t_ns and n_scans scans were run again."""
+
+    from_t_ns: int
+    n_scans: int
+    trigger: tuple[tuple[str, int], ...]  # (sensor_id, seq) of the late measurements
+
+
+@dataclass(frozen=True)
+class Counts:
+    """Cumulative counts of a tracker.
+
+    Intake: received = applied + sum(refused.values()) (duplicates are refused with reason
+    "duplicate"). What the data did (a function of the accepted measurements, whatever their
+    arrival order): updates, births, births_refused_capacity, unassigned, confirmations,
+    deletions by reason, numerical_skips. How the data arrived: replays (calls that rewound),
+    replayed_scans (scans run again), rescans (a newest scan run again with more measurements),
+    late_applied (measurements that landed before the newest scan).
+    """
+
+    received: int = 0
+    applied: int = 0
+    refused: Mapping[Reason, int] = field(default_factory=dict)
+    updates: int = 0
+    births: int = 0
+    births_refused_capacity: int = 0
+    unassigned: int = 0
+    confirmations: int = 0
+    deletions: Mapping[DeletionReason, int] = field(default_factory=dict)
+    numerical_skips: int = 0
+    replays: int = 0
+    replayed_scans: int = 0
+    rescans: int = 0
+    late_applied: int = 0
+
+    @property
+    def duplicates(self) -> int:
+        return self.refused.get(Reason.DUPLICATE, 0)
+
+
+@dataclass(frozen=True)
+class StepResult:
+    """Everything one call to Tracker.process did."""
+
+    estimates: tuple[Estimate, ...]
+    events: tuple[TrackEvent, ...]
+    refused: tuple[Refusal, ...]
+    applied: int
+    replays: tuple[Replay, ...]
+    associations: tuple[Association, ...]
+    measurements: tuple[MeasuredPoint, ...] = ()
