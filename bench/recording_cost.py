@@ -35,7 +35,7 @@ class PerCallSink:
         self.rr = rr
         self.rec = rr.RecordingStream("fusion-bench", recording_id="percall")
         self.rec.save(str(path))
-        self.pi = list(tracker._pos_idx)
+        self.pi = list(tracker.position_indices)
 
     def log_step(self, result: StepResult, *, arrival_ns: int | None = None) -> None:
         rr = self.rr
@@ -63,8 +63,8 @@ def _run(records: list, cfg: Any, ns: str, sink_kind: str, tmp: Path) -> tuple[f
     sink: Any = None
     t_open = time.perf_counter()
     if sink_kind == "columnar":
-        sink = RerunSink(tmp / "c.rrd", layout=tracker.layout, position_indices=tracker._pos_idx,
-                         velocity_indices=tracker._vel_idx, counts=lambda: tracker.counts)
+        sink = RerunSink(tmp / "c.rrd", layout=tracker.layout, position_indices=tracker.position_indices,
+                         velocity_indices=tracker.velocity_indices, counts=lambda: tracker.counts.flat())
     elif sink_kind == "per-call":
         sink = PerCallSink(tmp / "p.rrd", tracker)
     fixed = time.perf_counter() - t_open

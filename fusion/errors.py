@@ -5,7 +5,10 @@ FusionError
 │   ├── ShapeError             wrong dimension or shape
 │   ├── NonFiniteError         NaN or inf in an array
 │   ├── NotPositiveDefiniteError   a covariance that is not symmetric positive definite
-│   └── TimeError              a time step that goes backwards (negative dt)
+│   ├── TimeError              a time step that goes backwards (negative dt)
+│   └── MessageError           bytes from the wire that are not the message expected
+│       ├── MalformedMessage   they do not decode (truncated, not msgpack/JSON, bad UTF-8)
+│       └── InvalidMessage     they decode but break the schema (the field is named)
 ├── NumericalError             a computation produced a non-PD covariance (ArithmeticError too)
 └── ConfigError                a configuration that cannot work (ValueError too)
 """
@@ -43,3 +46,15 @@ class NumericalError(FusionError, ArithmeticError):
 
 class ConfigError(FusionError, ValueError):
     """A configuration that cannot work."""
+
+
+class MessageError(InputError):
+    """Bytes from the wire that are not the message expected; the text says why."""
+
+
+class MalformedMessage(MessageError):
+    """Bytes that do not decode at all."""
+
+
+class InvalidMessage(MessageError):
+    """A message that decodes but breaks the schema; the text names the field."""

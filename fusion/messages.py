@@ -21,7 +21,7 @@ from typing import Annotated, Literal
 
 import msgspec
 
-from fusion.errors import InputError
+from fusion.errors import InputError, InvalidMessage, MalformedMessage, MessageError  # noqa: F401 (MessageError: re-exported)
 
 SCHEMA_VERSION = 1
 _BIG = 1e15
@@ -175,10 +175,6 @@ _dec_any = msgspec.msgpack.Decoder(Message)
 _json_any = msgspec.json.Decoder(Message)
 
 
-class MessageError(InputError):
-    """Bytes that do not decode into the expected message; the text names the field."""
-
-
 def encode(msg: Message) -> bytes:
     """msgpack bytes of a message."""
     return _enc.encode(msg)
@@ -193,10 +189,10 @@ def _decode(dec: msgspec.msgpack.Decoder | msgspec.json.Decoder, data: bytes | s
     try:
         return dec.decode(data)
     except msgspec.ValidationError as e:
-        raise MessageError(f"invalid {what}: {e}") from None
+        raise InvalidMessage(f"invalid {what}: {e}") from None
     except (msgspec.DecodeError, UnicodeDecodeError, ValueError, OverflowError) as e:
         # msgspec raises UnicodeDecodeError for invalid UTF-8 in a string, not DecodeError
-        raise MessageError(f"malformed {what}: {type(e).__name__}: {e}") from None
+        raise MalformedMessage(f"malformed {what}: {type(e).__name__}: {e}") from None
 
 
 def decode_measurement(data: bytes) -> Measurement:

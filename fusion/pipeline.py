@@ -1,29 +1,34 @@
-"""The one path every sample takes, live or replayed: decode, validate, track, record.
+"""The one path every sample takes, live or replayed: decode, validate, track, record, select.
 
 `Pipeline.ingest(records)` takes raw samples `(arrival_ns, key, payload)` in arrival order and
 returns the estimates to publish. The live service feeds it batches drained from its intake
-queue; `fusion replay` feeds it the same records read back from a stream file. The tracker's
-result depends only on the measurements accepted, and acceptance is decided one sample at a
-time in arrival order, so a replay reproduces the live run's estimates exactly, however the
-records are batched.
+queue; `fusion replay` feeds it the same records read back from a stream file. Admission is
+decided one sample at a time in arrival order (the arrival time feeds the tracker's clock), so
+a replay reproduces the live run's estimates exactly, however the records are batched.
 
-Counts add up: received = applied + duplicates + sum(refused by reason) (+ queued, in the service).
+A measurement must come on its own sensor's key (`.../meas/<sensor_id>`), truth on its own
+target's key: anyone who may publish on one key cannot speak for another sensor.
+
+Counts add up: received = applied + truth + sum(refused by reason), where received is every
+sample handed to `ingest` and duplicates are refusals with reason "duplicate".
 """
 
 from __future__ import annotations
 
+import dataclasses
 import logging
-from collections import Counter
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Protocol
 
 import numpy as np
 
+from fusion.errors import InvalidMessage, MalformedMessage
 from fusion.io.latency import LatencyTracker
 from fusion.io.ratelimit import RateLimitedLog
+from fusion.publication import PublishedView
 from fusion.tracking.detection import Detection, Reason
-from fusion.tracking.results import Estimate, StepResult
+from fusion.tracking.results import Counts, Estimate, StepResult
 from fusion.tracking.tracker import Tracker
 
 log = logging.getLogger("fusion.pipeline")
@@ -31,28 +36,22 @@ log = logging.getLogger("fusion.pipeline")
 Record = tuple[int, str, bytes]  # (arrival_ns, key expression, payload)
 
 
-class BadSample(Exception):  # noqa: N818 - a refusal, not a failure
-    """A sample refused at the edge, with its reason."""
-
-    def __init__(self, reason: Reason, detail: str) -> None:
-        super().__init__(f"{reason.value}: {detail}")
-        self.reason = reason
-        self.detail = detail
-
-
 class Codec(Protocol):
-    """Wire decoding the pipeline needs (fusion.io.wire implements it)."""
+    """Wire decoding the pipeline needs (fusion.io.wire implements it). Decoders raise
+    MalformedMessage or InvalidMessage (fusion.errors)."""
 
     def kind(self, key: str) -> str:
         """"meas", "truth" or "other" for a key expression."""
         ...
 
-    def detection(self, payload: bytes) -> Detection:
-        """A Detection, or BadSample(MALFORMED | INVALID | BAD_COVARIANCE, why)."""
+    def key_id(self, key: str) -> str:
+        """The sensor or target id a key names (its last segment)."""
         ...
 
+    def detection(self, payload: bytes) -> Detection: ...
+
     def truth(self, payload: bytes, layout: tuple[str, ...]) -> tuple[str, int, np.ndarray] | None:
-        """(target_id, t_ns, state in `layout`), None when the truth lacks a component; BadSample if malformed."""
+        """(target_id, t_ns, state in `layout`), None when the truth lacks a component."""
         ...
 
 
@@ -71,7 +70,7 @@ class Output:
 
 
 class Pipeline:
-    """Decode, validate, track and record; see the module docstring."""
+    """Decode, validate, track, record and select what to publish; see the module docstring."""
 
     def __init__(self, tracker: Tracker, codec: Codec, *, sink: Sink | None = None,
                  max_future_wall_ns: int | None = None, publish_tentative: bool = False,
@@ -80,68 +79,86 @@ class Pipeline:
         self.codec = codec
         self.sink = sink
         self.max_future_wall_ns = max_future_wall_ns
-        self.publish_tentative = publish_tentative
-        self.counts: Counter[str] = Counter()
+        self.view = PublishedView(publish_tentative=publish_tentative)
         self.latency = LatencyTracker()
         self.warn = RateLimitedLog(log, per_minute=warnings_per_minute)
-        self.truth_samples = 0
+        self._received = 0
+        self._truth = 0
+        self._refused: dict[Reason, int] = {}  # at the edge, before the tracker
+
+    def counts(self) -> Counts:
+        """The tracker's counts with the edge's folded in (see the module docstring)."""
+        c = self.tracker.counts
+        refused = dict(c.refused)
+        for r, n in self._refused.items():
+            refused[r] = refused.get(r, 0) + n
+        return dataclasses.replace(c, received=self._received, truth=self._truth, refused=dict(sorted(refused.items())))
 
     def _refuse(self, reason: Reason, key: str, detail: str, t_ns: int = 0) -> None:
-        self.counts[f"refused_{reason.value}"] += 1
+        self._refused[reason] = self._refused.get(reason, 0) + 1
         self.warn.warn(reason.value, "refused sample on %s: %s: %s", key, reason.value, detail)
         if self.sink is not None:
             self.sink.log_text(t_ns, f"refused sample on {key}: {reason.value}: {detail}", "WARN")
+
+    def _decode(self, arrival_ns: int, key: str, payload: bytes) -> Detection | None:
+        """One sample: a Detection to track, or None (truth recorded, or refused and counted)."""
+        kind = self.codec.kind(key)
+        try:
+            if kind == "truth":
+                tr = self.codec.truth(payload, self.tracker.layout)
+                if tr is not None and tr[0] != self.codec.key_id(key):
+                    self._refuse(Reason.KEY_MISMATCH, key, f"truth of {tr[0]!r} on another target's key")
+                    return None
+                self._truth += 1
+                if tr is not None and self.sink is not None:
+                    self.sink.log_truth(*tr)
+                return None
+            if kind != "meas":
+                self._refuse(Reason.INVALID, key, "not a measurement or truth key")
+                return None
+            d = self.codec.detection(payload)
+        except MalformedMessage as e:
+            self._refuse(Reason.MALFORMED, key, str(e))
+            return None
+        except InvalidMessage as e:
+            self._refuse(Reason.INVALID, key, str(e))
+            return None
+        except Exception as e:  # a decoder bug must cost one sample, never the service
+            log.exception("unexpected error decoding a sample on %s", key)
+            self._refuse(Reason.MALFORMED, key, f"{type(e).__name__}: {e}")
+            return None
+        if d.sensor_id != self.codec.key_id(key):
+            self._refuse(Reason.KEY_MISMATCH, key, f"a measurement of sensor {d.sensor_id!r} on another sensor's key",
+                         d.t_ns)
+            return None
+        if self.max_future_wall_ns is not None and d.t_ns > arrival_ns + self.max_future_wall_ns:
+            self._refuse(Reason.FUTURE, key, f"sensor time {(d.t_ns - arrival_ns) / 1e9:.1f} s ahead of arrival",
+                         d.t_ns)
+            return None
+        if d.sensor_id in self.tracker.sensors:
+            self.latency.add(d.sensor_id, arrival_ns - d.t_ns)
+        return dataclasses.replace(d, arrival_ns=arrival_ns)
 
     def ingest(self, records: Sequence[Record]) -> Output:
         """Process samples in arrival order; return the tracker's result and what to publish."""
         dets: list[Detection] = []
         last_arrival = None
         for arrival_ns, key, payload in records:
+            self._received += 1
             last_arrival = arrival_ns
-            kind = self.codec.kind(key)
-            if kind == "truth":
-                self.counts["truth"] += 1
-                try:
-                    tr = self.codec.truth(payload, self.tracker.layout)
-                except BadSample as e:
-                    self._refuse(e.reason, key, e.detail)
-                    continue
-                if tr is not None and self.sink is not None:
-                    self.sink.log_truth(*tr)
-                continue
-            self.counts["received"] += 1
-            if kind != "meas":
-                self._refuse(Reason.INVALID, key, "not a measurement key")
-                continue
-            try:
-                d = self.codec.detection(payload)
-            except BadSample as e:
-                self._refuse(e.reason, key, e.detail)
-                continue
-            except Exception as e:  # a decoder bug must cost one sample, never the service
-                log.exception("unexpected error decoding a sample on %s", key)
-                self._refuse(Reason.MALFORMED, key, f"{type(e).__name__}: {e}")
-                continue
-            if self.max_future_wall_ns is not None and d.t_ns > arrival_ns + self.max_future_wall_ns:
-                self._refuse(Reason.FUTURE, key, f"sensor time {(d.t_ns - arrival_ns) / 1e9:.1f} s ahead of arrival",
-                             d.t_ns)
-                continue
-            if d.sensor_id in self.tracker.sensors:
-                self.latency.add(d.sensor_id, arrival_ns - d.t_ns)
-            dets.append(d)
+            d = self._decode(arrival_ns, key, payload)
+            if d is not None:
+                dets.append(d)
         result = self.tracker.process(dets)
-        self.counts["applied"] += result.applied
         for r in result.refused:
-            if r.reason == Reason.DUPLICATE:
-                self.counts["duplicates"] += 1
-            else:
-                self.counts[f"refused_{r.reason.value}"] += 1
-            self.warn.warn(r.reason.value, "refused %s#%d at t_ns=%d: %s: %s",
-                           r.sensor_id, r.seq, r.t_ns, r.reason.value, r.detail)
+            self.warn.warn(r.reason.value, "refused %s#%d at t=%.3f s: %s: %s",
+                           r.sensor_id, r.seq, r.t_ns / 1e9, r.reason.value, r.detail)
         if self.sink is not None and (result.estimates or result.events or result.refused or result.measurements):
             self.sink.log_step(result, arrival_ns=last_arrival)
-        pub = tuple(e for e in result.estimates if e.status != "tentative" or self.publish_tentative)
+        pub = self.view.select(result.estimates)
+        self.view.prune(self.tracker.horizon_ns, self.tracker.track_set)
         return Output(result, pub)
 
-    def refused_by_reason(self) -> dict[str, int]:
-        return {k[len("refused_"):]: v for k, v in sorted(self.counts.items()) if k.startswith("refused_")}
+    def snapshot(self) -> list[Estimate]:
+        """The latest published estimate of every live confirmed track."""
+        return self.view.snapshot(self.tracker.track_set)

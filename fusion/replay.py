@@ -24,13 +24,6 @@ from fusion.tracking.tracker import Tracker
 CONFIGS = Path(__file__).resolve().parent.parent / "configs"
 
 
-def counts(pipe: Pipeline) -> dict[str, int]:
-    c = dict(pipe.counts)
-    for k in ("replays", "late_applied", "replayed_scans"):
-        c[k] = pipe.tracker.counts[k]
-    return c
-
-
 @dataclass(frozen=True)
 class ReplayCounts:
     records: int
@@ -60,8 +53,8 @@ def replay(stream: str | Path, *, config: str | Path | None = None, out: str | P
     sink = None
     if out is not None:
         sink = RerunSink(out, recording_id=Path(out).stem, layout=tracker.layout,
-                         position_indices=tracker._pos_idx, velocity_indices=tracker._vel_idx,
-                         meta={"namespace": ns, "replay_of": str(stream)}, counts=lambda: counts(pipe))
+                         position_indices=tracker.position_indices, velocity_indices=tracker.velocity_indices,
+                         meta={"namespace": ns, "replay_of": str(stream)}, counts=lambda: pipe.counts().flat())
     pipe = Pipeline(tracker, wire.Codec(ns), sink=sink,
                     max_future_wall_ns=round(cfg.intake.max_future_wall_s * 1e9),
                     publish_tentative=cfg.publish_tentative)

@@ -52,8 +52,8 @@ class Service:
         self.sink: RotatingSink | RerunSink | None = None
         rdir = Path(recording_dir) if recording_dir is not None else Path(rc.directory)
         common: dict[str, Any] = dict(
-            layout=self.tracker.layout, position_indices=self.tracker._pos_idx,
-            velocity_indices=self.tracker._vel_idx, flush_interval_s=rc.flush_interval_s,
+            layout=self.tracker.layout, position_indices=self.tracker.position_indices,
+            velocity_indices=self.tracker.velocity_indices, flush_interval_s=rc.flush_interval_s,
             meta={"namespace": self.ns, "sensors": sorted(self.tracker.sensors), "model": self.tracker.model_name},
             counts=self._counts_for_recording,
         )
@@ -76,12 +76,11 @@ class Service:
         self._q: deque[Record] = deque()
         self._wake = threading.Event()
         self._stop = threading.Event()
-        self._arrived = 0  # measurement samples seen by the callback (written by Zenoh threads only)
+        self._arrived = 0  # samples seen by the callback, any key (written by Zenoh threads only)
         self._overload = 0
         self._processed = 0
         self._settled = 0  # samples fully handled (published, status refreshed) when the queue last emptied
         self._started_ns = time.time_ns()
-        self._latest: dict[int, Estimate] = {}
         self._status_payload = b""
         self._snapshot_payload = b""
         self._status_at = 0.0
@@ -93,12 +92,10 @@ class Service:
     # ---- Zenoh side ----------------------------------------------------------------------------
     def _on_sample(self, sample: Any) -> None:
         key = str(sample.key_expr)
-        is_meas = wire.is_measurement_key(key)
-        if is_meas:
-            self._arrived += 1
-            if len(self._q) >= self.config.intake.queue_max:
-                self._overload += 1
-                return
+        self._arrived += 1
+        if wire.is_measurement_key(key) and len(self._q) >= self.config.intake.queue_max:
+            self._overload += 1
+            return
         self._q.append((time.time_ns(), key, sample.payload.to_bytes()))
         self._wake.set()
 
@@ -141,7 +138,7 @@ class Service:
             for rec in batch:
                 self.stream.write(*rec)
         out = self.pipeline.ingest(batch)
-        self._processed += sum(1 for _, k, _ in batch if wire.is_measurement_key(k))
+        self._processed += len(batch)
         enc = wire.estimate_encoder(self.tracker.layout, self.tracker.model_name)
         BLOCK = self._zenoh.CongestionControl.BLOCK
         for e in out.to_publish:
@@ -149,12 +146,6 @@ class Service:
             self.published += 1
             if self.on_publish is not None:
                 self.on_publish(e)
-        for e in out.result.estimates:
-            if e.status == "confirmed":
-                self._latest[e.track_id] = e
-        for ev in out.result.events:
-            if ev.kind in ("deleted", "retracted"):
-                self._latest.pop(ev.track_id, None)
 
     def run(self, *, duration_s: float | None = None) -> int:
         """Process until stop() (or a signal handler calling it) or `duration_s`; then shut down."""
@@ -204,16 +195,15 @@ class Service:
 
     # ---- status --------------------------------------------------------------------------------
     def _counts_for_recording(self) -> dict[str, int]:
-        c = dict(self.pipeline.counts)
-        c["overload"] = self._overload
-        for k in ("replays", "late_applied", "replayed_scans"):
-            c[k] = self.tracker.counts[k]
+        c = self.pipeline.counts().flat()
+        c["refused/overload"] = self._overload
         return c
 
     def status_dict(self) -> dict[str, Any]:
-        """Counts add up: received = applied + duplicates + sum(refused) + queued."""
-        c = self.pipeline.counts
-        refused = self.pipeline.refused_by_reason()
+        """Counts add up: received = applied + truth + sum(refused) + queued (duplicates are
+        refusals with reason "duplicate")."""
+        c = self.pipeline.counts()
+        refused = {r.value: n for r, n in c.refused.items()}
         if self._overload:
             refused["overload"] = self._overload
         arrived = self._arrived
@@ -224,10 +214,10 @@ class Service:
         return {
             "uptime_s": (time.time_ns() - self._started_ns) / 1e9,
             "counts": {
-                "received": arrived, "applied": c["applied"], "duplicates": c["duplicates"],
-                "refused": refused, "queued": queued, "replays": self.tracker.counts["replays"],
-                "late_applied": self.tracker.counts["late_applied"], "published": self.published,
-                "truth": c["truth"],
+                "received": arrived, "applied": c.applied, "duplicates": c.duplicates,
+                "refused": refused, "queued": queued, "replays": c.replays,
+                "late_applied": c.late_applied, "published": self.published,
+                "truth": c.truth,
             },
             "tracks": dict(sorted(by_status.items())),
             "latency": self.pipeline.latency.stats(),
@@ -263,4 +253,4 @@ class Service:
         self._status_payload = wire.encode_status(self.status_dict())
         layout, model = self.tracker.layout, self.tracker.model_name
         self._snapshot_payload = wire.encode_snapshot(
-            [wire.estimate_message(e, layout=layout, model=model) for _, e in sorted(self._latest.items())])
+            [wire.estimate_message(e, layout=layout, model=model) for e in self.pipeline.snapshot()])

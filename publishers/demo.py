@@ -72,8 +72,9 @@ def demo_report(r: DemoResult) -> str:
         f"demo finished in {r.wall_s:.1f} s: published {r.published.get('meas', 0)} measurements and "
         f"{r.published.get('truth', 0)} truth samples; the service published {r.estimates_published} estimates",
         f"late measurements folded in by replay: {c.get('late_applied', 0)} ({c.get('replays', 0)} replays); "
-        f"duplicates: {c.get('duplicates', 0)}; refused: "
-        + (", ".join(f"{k[len('refused_'):]}={v}" for k, v in c.items() if k.startswith("refused_")) or "none"),
+        f"duplicates: {c.get('refused/duplicate', 0)}; refused otherwise: "
+        + (", ".join(f"{k[len('refused/'):]}={v}" for k, v in c.items()
+                     if k.startswith("refused/") and k != "refused/duplicate" and v) or "none"),
         "",
         format_summary(s),
         "",

@@ -164,8 +164,11 @@ class RerunSink:
         for e in result.estimates:
             self._estimate(e, arrival_ns)
         for ev in result.events:
-            tag = " (replay)" if ev.replayed else ""
-            self.log_text(ev.t_ns, f"track {ev.track_id} {ev.kind}{tag} {ev.detail}".rstrip())
+            why = "" if ev.reason is None else f" {ev.reason.value}"
+            if ev.retracted:
+                self.log_text(ev.t_ns, f"track {ev.track_id} withdrawn {ev.kind.value}{why} (a replay no longer has it)")
+            else:
+                self.log_text(ev.t_ns, f"track {ev.track_id} {ev.kind.value}{why}")
         for rp in result.replays:
             late = ", ".join(f"{s}#{q}" for s, q in rp.trigger)
             self.log_text(rp.from_t_ns, f"replay of {rp.n_scans} scans from late {late}", "WARN")

@@ -9,8 +9,7 @@ from typing import Any
 import numpy as np
 
 from fusion import messages as m
-from fusion.pipeline import BadSample
-from fusion.tracking.detection import Detection, Reason
+from fusion.tracking.detection import Detection
 from fusion.tracking.results import Estimate
 
 STREAM_SUFFIX = ".fstream"
@@ -59,20 +58,15 @@ class Codec:
     def kind(self, key: str) -> str:
         return m.key_kind(key)
 
+    def key_id(self, key: str) -> str:
+        return key.rsplit("/", 1)[-1]
+
     def detection(self, payload: bytes) -> Detection:
-        try:
-            msg = m.decode_measurement(payload)
-        except m.MessageError as e:
-            reason = Reason.MALFORMED if str(e).startswith("malformed") else Reason.INVALID
-            raise BadSample(reason, str(e)) from None
-        return detection_of(msg)
+        """Raises MalformedMessage or InvalidMessage (fusion.errors) for bad bytes."""
+        return detection_of(m.decode_measurement(payload))
 
     def truth(self, payload: bytes, layout: tuple[str, ...]) -> tuple[str, int, np.ndarray] | None:
-        try:
-            msg = m.decode_truth(payload)
-        except m.MessageError as e:
-            raise BadSample(Reason.MALFORMED if str(e).startswith("malformed") else Reason.INVALID, str(e)) from None
-        return truth_in_layout(msg, layout)
+        return truth_in_layout(m.decode_truth(payload), layout)
 
 
 def truth_in_layout(msg: m.Truth, layout: tuple[str, ...]) -> tuple[str, int, np.ndarray] | None:

@@ -28,8 +28,8 @@ def _rows(path: Path) -> dict[str, int]:
 def _record(path: Path, *, batch: int = 1) -> tuple[list, dict]:
     tr, dets, truth = maneuver_run()
     results = []
-    with RerunSink(path, layout=tr.layout, position_indices=tr._pos_idx, velocity_indices=tr._vel_idx,
-                   counts=lambda: tr.counts) as sink:
+    with RerunSink(path, layout=tr.layout, position_indices=tr.position_indices, velocity_indices=tr.velocity_indices,
+                   counts=lambda: tr.counts.flat()) as sink:
         for t, x in sorted(truth.items()):
             sink.log_truth("target", t, x)
         for i in range(0, len(dets), batch):
@@ -108,8 +108,8 @@ def test_inspect_reads_damaged_files(tmp_path: Path, cut: str) -> None:
 
 def test_rotation_loses_and_duplicates_nothing(tmp_path: Path) -> None:
     tr, dets, _ = maneuver_run()
-    sink = RotatingSink(tmp_path, prefix="rot", layout=tr.layout, position_indices=tr._pos_idx,
-                        velocity_indices=tr._vel_idx, rotate_bytes=40_000, rotate_s=1e9, flush_interval_s=0.0)
+    sink = RotatingSink(tmp_path, prefix="rot", layout=tr.layout, position_indices=tr.position_indices,
+                        velocity_indices=tr.velocity_indices, rotate_bytes=40_000, rotate_s=1e9, flush_interval_s=0.0)
     results = []
     for d in dets:
         r = tr.process([d])

@@ -1,0 +1,57 @@
+"""What the service publishes, and the view a subscriber ends up with.
+
+Rule: an estimate is published when it is confirmed (or when tentative ones are published at
+all); once a key (track_id, t_ns, sensor_id) has been published, every later revision of it is
+published too, whatever its status, retractions included. A subscriber keeps the latest
+revision per key and drops keys whose latest revision is retracted or tentative: that view is
+then the same for any arrival order (a replay that demotes a published estimate to tentative
+publishes the demotion).
+
+The snapshot (the `snapshot` queryable) follows the tracker, not the history of publications:
+the latest published estimate of every live confirmed track.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+
+from fusion.tracking.results import Estimate, EstimateKey
+from fusion.tracking.trackset import Status, TrackSet
+
+
+class PublishedView:
+    def __init__(self, *, publish_tentative: bool = False) -> None:
+        self.publish_tentative = publish_tentative
+        self.latest: dict[EstimateKey, Estimate] = {}  # published keys -> latest published revision
+        self._pruned_at: int | None = None
+
+    def select(self, estimates: Iterable[Estimate]) -> tuple[Estimate, ...]:
+        """The estimates of one step to publish (see the module docstring); remembers them."""
+        out = []
+        for e in estimates:
+            k = e.key
+            if k in self.latest or e.status == "confirmed" or (self.publish_tentative and e.status == "tentative"):
+                self.latest[k] = e
+                out.append(e)
+        return tuple(out)
+
+    def snapshot(self, tracks: TrackSet) -> list[Estimate]:
+        """The latest published estimate of each live confirmed track, by track id."""
+        out = []
+        for t in tracks.tracks:
+            if t.status != Status.CONFIRMED:
+                continue
+            e = self.latest.get((t.id, t.state.t_ns, t.last[0]))
+            if e is not None and e.status == "confirmed":
+                out.append(e)
+        return sorted(out, key=lambda e: e.track_id)
+
+    def prune(self, horizon_ns: int | None, tracks: TrackSet, *, every_ns: int = 1_000_000_000) -> None:
+        """Forget keys before the horizon (they can no longer be revised) unless they hold a live
+        track's current estimate. Runs when the horizon has moved by `every_ns` since last time."""
+        if horizon_ns is None or (self._pruned_at is not None and horizon_ns - self._pruned_at < every_ns):
+            return
+        self._pruned_at = horizon_ns
+        current = {(t.id, t.state.t_ns, t.last[0]) for t in tracks.tracks}
+        for k in [k for k in self.latest if k[1] < horizon_ns and k not in current]:
+            del self.latest[k]
