@@ -30,6 +30,7 @@ from fusion.core.imm import IMM, Filter
 from fusion.core.kalman import ExtendedKalmanFilter, KalmanFilter
 from fusion.core.measurement import CartesianPosition, MeasurementModel, Radar2D
 from fusion.core.motion import ConstantVelocity, LinearModel, MotionModel, NonlinearModel
+from fusion.core.switching import rates_from_sojourn
 from fusion.core.timebase import seconds_to_ns
 from fusion.errors import ConfigError
 
@@ -301,9 +302,10 @@ def run_reference(ref: Reference, filt: Filter | None = None) -> Run:
     return Run(xs, Ps, nis, nees)
 
 
-def maneuver_imm(ref: Reference, *, q_low: float = 0.01, q_high: float = 1.0, p_stay: float = 0.95) -> IMM:
-    """Two constant-velocity models, low and high process noise, for maneuver2d."""
+def maneuver_imm(ref: Reference, *, q_low: float = 0.01, q_high: float = 1.0, sojourn_s: float = 2.0) -> IMM:
+    """Two constant-velocity models, low and high process noise, for maneuver2d; each mode
+    lasts sojourn_s seconds on average (2 s: about 0.95 to stay over one 0.1 s step)."""
     return IMM(
         [KalmanFilter(ConstantVelocity(ndim=2, q=q_low)), KalmanFilter(ConstantVelocity(ndim=2, q=q_high))],
-        [[p_stay, 1 - p_stay], [1 - p_stay, p_stay]],
+        rates=rates_from_sojourn([sojourn_s, sojourn_s]),
     )

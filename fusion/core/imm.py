@@ -1,11 +1,17 @@
 r"""Interacting multiple model (IMM) estimator over a bank of filters sharing one state space.
 
-With mode probabilities mu_i and Markov switching p_ij = P(model j now | model i before):
+Mode switching follows elapsed time, not the number of predictions: the mode is a
+continuous-time Markov chain with rate matrix Lambda (see fusion.core.switching), and a step of
+dt seconds switches with p_ij = Pi(dt)_ij = expm(Lambda dt)_ij, so Pi(0) = I and
+Pi(a + b) = Pi(a) Pi(b).
+
+With mode probabilities mu_i and p_ij = Pi(dt)_ij, for dt > 0:
     mixing      c_j = sum_i p_ij mu_i,   w_ij = p_ij mu_i / c_j
                 x0_j = sum_i w_ij x_i,   P0_j = sum_i w_ij (P_i + (x_i - x0_j)(x_i - x0_j)')
     predict     each filter j predicts (x0_j, P0_j); predicted mode probabilities are c
     update      each filter j updates, likelihood L_j;  mu_j = c_j L_j / sum_k c_k L_k
     combine     x = sum mu_j x_j,   P = sum mu_j (P_j + (x_j - x)(x_j - x)')
+At dt = 0 there is no mixing and no prediction: the state is returned unchanged.
 The filters may be KF, EKF or UKF, each with its own motion model (e.g. low- and high-noise
 constant velocity, or constant velocity embedded in the coordinated-turn state).
 """
@@ -19,9 +25,11 @@ from typing import Protocol
 import numpy as np
 from numpy.typing import ArrayLike
 
-from fusion.core.checks import Array, as_matrix, as_vector
+from fusion.core.checks import Array, as_vector
 from fusion.core.gaussian import GaussianState, Update
 from fusion.core.measurement import MeasurementModel
+from fusion.core.switching import check_rates, transition_matrix
+from fusion.core.timebase import dt_seconds
 from fusion.errors import ConfigError
 
 
@@ -73,24 +81,37 @@ class IMMState:
 
 
 class IMM:
-    """The IMM estimator. `transition[i, j]` is the per-prediction switching probability."""
+    """The IMM estimator with time-based switching; `rates` is the rate matrix Lambda in 1/s
+    (fusion.core.switching: `rates_from_sojourn` builds it from mean sojourn times).
 
-    def __init__(self, filters: Sequence[Filter], transition: ArrayLike) -> None:
+    Pi(dt) is computed once per distinct dt and kept (up to CACHE_SIZE values, then the cache
+    starts over): sensors at fixed rates give few distinct steps.
+    """
+
+    CACHE_SIZE = 4096
+
+    def __init__(self, filters: Sequence[Filter], *, rates: ArrayLike) -> None:
         if len(filters) < 2:
             raise ConfigError("an IMM needs at least two filters")
         n = filters[0].ndim_state
         if any(f.ndim_state != n for f in filters):
             raise ConfigError("every filter of an IMM must share one state space")
-        M = len(filters)
-        T = as_matrix("transition", transition, M, M)
-        if (T < 0).any() or not np.allclose(T.sum(axis=1), 1.0, atol=1e-9):
-            raise ConfigError("transition must be a row-stochastic matrix (rows sum to 1)")
         self.filters = tuple(filters)
-        self.transition = T
+        self.rates = check_rates(rates, len(filters))
+        self._pi: dict[float, Array] = {}
 
     @property
     def ndim_state(self) -> int:
         return self.filters[0].ndim_state
+
+    def transition(self, dt_s: float) -> Array:
+        """Pi(dt) = expm(Lambda dt) for this IMM's rates (cached per dt)."""
+        Pi = self._pi.get(dt_s)
+        if Pi is None:
+            if len(self._pi) >= self.CACHE_SIZE:
+                self._pi.clear()
+            Pi = self._pi[dt_s] = transition_matrix(self.rates, dt_s)
+        return Pi
 
     def initial(self, x: ArrayLike, P: ArrayLike, *, t_ns: int, mu: ArrayLike | None = None) -> IMMState:
         st = GaussianState.create(x, P, t_ns=t_ns)
@@ -101,8 +122,16 @@ class IMM:
         return IMMState.from_components([st] * M, m)
 
     def predict(self, state: IMMState, t_ns: int, *, u: ArrayLike | None = None) -> IMMState:
-        c = state.mu @ self.transition
-        W = (self.transition * state.mu[:, None]) / np.where(c > 0, c, 1.0)  # W[i, j] = w_ij
+        """Mix with Pi(dt) and predict every mode to t_ns (>= state.t_ns).
+
+        At dt = 0 nothing moves, switches or mixes: `state` itself is returned.
+        """
+        dt = dt_seconds(state.t_ns, t_ns)
+        if dt == 0.0:
+            return state
+        T = self.transition(dt)
+        c = state.mu @ T
+        W = (T * state.mu[:, None]) / np.where(c > 0, c, 1.0)  # W[i, j] = w_ij
         xs = np.stack([s.x for s in state.components])
         Ps = np.stack([s.P for s in state.components])
         out = []

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from scipy.linalg import expm
 
 from fusion.core.imm import IMM
 from fusion.core.kalman import KalmanFilter, predict_arrays, update_arrays, update_single
@@ -116,7 +117,7 @@ def test_imm_of_identical_models_equals_single_filter(name: str) -> None:
     seed = 5
     ref = reference(name, seed=seed)
     kf = KalmanFilter(ref.motion)
-    imm = IMM([KalmanFilter(ref.motion), KalmanFilter(ref.motion)], [[0.9, 0.1], [0.3, 0.7]])
+    imm = IMM([KalmanFilter(ref.motion), KalmanFilter(ref.motion)], rates=[[-1.0, 1.0], [3.0, -3.0]])
     s1 = kf.initial(ref.x0, ref.P0, t_ns=0)
     s2 = imm.initial(ref.x0, ref.P0, t_ns=0, mu=[0.2, 0.8])
     for k in range(ref.n_steps):
@@ -135,13 +136,13 @@ def test_imm_of_identical_models_equals_single_filter(name: str) -> None:
 
 def test_imm_mode_probabilities_follow_markov_chain_when_models_identical() -> None:
     ref = reference("cv1d_a", seed=5)
-    T = np.array([[0.9, 0.1], [0.3, 0.7]])
-    imm = IMM([KalmanFilter(ref.motion), KalmanFilter(ref.motion)], T)
+    rates = np.array([[-1.0, 1.0], [3.0, -3.0]])
+    imm = IMM([KalmanFilter(ref.motion), KalmanFilter(ref.motion)], rates=rates)
     st = imm.initial(ref.x0, ref.P0, t_ns=0, mu=[0.2, 0.8])
     mu = np.array([0.2, 0.8])
     for k in range(10):
         st = imm.update(imm.predict(st, int(ref.t_ns[k])), ref.z[k], ref.meas).state
-        mu = mu @ T
+        mu = mu @ expm(rates * ref.dt_s)
         np.testing.assert_allclose(st.mu, mu, rtol=1e-12, err_msg=f"seed=5 step {k}")
 
 
@@ -150,7 +151,7 @@ def test_imm_combine_is_moment_matching() -> None:
     rng = np.random.default_rng(9)
     meas = CartesianPosition(ndim_state=4, indices=(0, 2), R=[0.01, 0.01])
     imm = IMM([KalmanFilter(ConstantVelocity(ndim=2, q=0.01)),
-               KalmanFilter(ConstantVelocity(ndim=2, q=1.0))], [[0.95, 0.05], [0.05, 0.95]])
+               KalmanFilter(ConstantVelocity(ndim=2, q=1.0))], rates=[[-0.5, 0.5], [0.5, -0.5]])
     st = imm.initial(np.zeros(4), np.eye(4), t_ns=0)
     for k in range(20):
         st = imm.update(imm.predict(st, (k + 1) * 100_000_000), rng.standard_normal(2), meas).state
