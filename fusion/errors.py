@@ -7,8 +7,8 @@ FusionError
 │   ├── NotPositiveDefiniteError   a covariance that is not symmetric positive definite
 │   ├── TimeError              a time step that goes backwards (negative dt)
 │   └── MessageError           bytes from the wire that are not the message expected
-│       ├── MalformedMessage   they do not decode (truncated, not msgpack/JSON, bad UTF-8)
-│       └── InvalidMessage     they decode but break the schema (the field is named)
+│       ├── MalformedMessageError   they do not decode (truncated, not msgpack/JSON, bad UTF-8)
+│       └── InvalidMessageError     they decode but break the schema (the field is named)
 ├── NumericalError             a computation produced a non-PD covariance (ArithmeticError too)
 └── ConfigError                a configuration that cannot work (ValueError too)
 """
@@ -52,9 +52,9 @@ class MessageError(InputError):
     """Bytes from the wire that are not the message expected; the text says why."""
 
 
-class MalformedMessage(MessageError):
+class MalformedMessageError(MessageError):
     """Bytes that do not decode at all."""
 
 
-class InvalidMessage(MessageError):
+class InvalidMessageError(MessageError):
     """A message that decodes but breaks the schema; the text names the field."""

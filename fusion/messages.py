@@ -21,7 +21,7 @@ from typing import Annotated, Literal
 
 import msgspec
 
-from fusion.errors import InputError, InvalidMessage, MalformedMessage, MessageError  # noqa: F401 (MessageError: re-exported)
+from fusion.errors import InputError, InvalidMessageError, MalformedMessageError, MessageError  # noqa: F401 (MessageError: re-exported)
 
 SCHEMA_VERSION = 1
 _BIG = 1e15
@@ -133,7 +133,7 @@ class LatencyStats(Base, kw_only=True):
 
 
 class Counts(Base, kw_only=True):
-    """received = applied + duplicates + sum(refused.values()) + queued."""
+    """received = applied + truth + duplicates + sum(refused.values()) + queued."""
 
     received: int
     applied: int
@@ -189,10 +189,10 @@ def _decode(dec: msgspec.msgpack.Decoder | msgspec.json.Decoder, data: bytes | s
     try:
         return dec.decode(data)
     except msgspec.ValidationError as e:
-        raise InvalidMessage(f"invalid {what}: {e}") from None
+        raise InvalidMessageError(f"invalid {what}: {e}") from None
     except (msgspec.DecodeError, UnicodeDecodeError, ValueError, OverflowError) as e:
         # msgspec raises UnicodeDecodeError for invalid UTF-8 in a string, not DecodeError
-        raise MalformedMessage(f"malformed {what}: {type(e).__name__}: {e}") from None
+        raise MalformedMessageError(f"malformed {what}: {type(e).__name__}: {e}") from None
 
 
 def decode_measurement(data: bytes) -> Measurement:

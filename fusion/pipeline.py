@@ -23,7 +23,7 @@ from typing import Protocol
 
 import numpy as np
 
-from fusion.errors import InvalidMessage, MalformedMessage
+from fusion.errors import InvalidMessageError, MalformedMessageError
 from fusion.io.latency import LatencyTracker
 from fusion.io.ratelimit import RateLimitedLog
 from fusion.publication import PublishedView
@@ -38,7 +38,7 @@ Record = tuple[int, str, bytes]  # (arrival_ns, key expression, payload)
 
 class Codec(Protocol):
     """Wire decoding the pipeline needs (fusion.io.wire implements it). Decoders raise
-    MalformedMessage or InvalidMessage (fusion.errors)."""
+    MalformedMessageError or InvalidMessageError (fusion.errors)."""
 
     def kind(self, key: str) -> str:
         """"meas", "truth" or "other" for a key expression."""
@@ -117,10 +117,10 @@ class Pipeline:
                 self._refuse(Reason.INVALID, key, "not a measurement or truth key")
                 return None
             d = self.codec.detection(payload)
-        except MalformedMessage as e:
+        except MalformedMessageError as e:
             self._refuse(Reason.MALFORMED, key, str(e))
             return None
-        except InvalidMessage as e:
+        except InvalidMessageError as e:
             self._refuse(Reason.INVALID, key, str(e))
             return None
         except Exception as e:  # a decoder bug must cost one sample, never the service

@@ -28,6 +28,7 @@ from fusion.io.recording import RotatingSink
 from fusion.io.rerun_sink import RerunSink
 from fusion.io.zenoh_bus import session_config
 from fusion.pipeline import Pipeline, Record
+from fusion.tracking.detection import Reason
 from fusion.tracking.results import Estimate
 from fusion.tracking.tracker import Tracker
 
@@ -200,10 +201,9 @@ class Service:
         return c
 
     def status_dict(self) -> dict[str, Any]:
-        """Counts add up: received = applied + truth + sum(refused) + queued (duplicates are
-        refusals with reason "duplicate")."""
+        """Counts add up: received = applied + truth + duplicates + sum(refused) + queued."""
         c = self.pipeline.counts()
-        refused = {r.value: n for r, n in c.refused.items()}
+        refused = {r.value: n for r, n in c.refused.items() if r != Reason.DUPLICATE}
         if self._overload:
             refused["overload"] = self._overload
         arrived = self._arrived

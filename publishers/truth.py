@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fusion.core.motion import ConstantVelocity
+from fusion.core.motion import ConstantVelocity, CoordinatedTurn
 from fusion.core.timebase import seconds_to_ns
 from fusion.scenarios import Reference, noise_factor, reference
 
@@ -27,15 +27,23 @@ class TargetTruth:
         return self.states[:, idx]
 
 
+MIX_Q = 0.05  # the mix's white-noise acceleration: spectral density MIX_Q^2 = 0.0025 m^2/s^3
+MIX_TURN_RADPS = 0.1  # the turning target's rate, for MIX_TURN_S seconds
+MIX_TURN_S = 10.5  # ~60 degrees
+
+
 def mix_truth(*, n_targets: int, dt_s: float, duration_s: float, seed: int) -> list[TargetTruth]:
-    """2-D constant-velocity targets (white-noise acceleration, q = 0.05): the first two cross
-    each other half-way, the third turns by 60 degrees a third of the way in, the rest start
-    on a ring 1-3 km out, heading inwards."""
+    """2-D nearly-constant-velocity targets (white-noise acceleration of density MIX_Q^2): the
+    first two cross each other half-way, the third flies a coordinated turn at MIX_TURN_RADPS for
+    MIX_TURN_S seconds from a third of the way in, the rest start on a ring 1-3 km out, heading
+    inwards. The state is [x, vx, y, vy, omega] with omega the true turn rate."""
     rng = np.random.default_rng(seed)
     K = round(duration_s / dt_s)
-    model = ConstantVelocity(ndim=2, q=0.05)
+    model = ConstantVelocity(ndim=2, q=MIX_Q)
     L = noise_factor(model.Q_dt(dt_s))
     F = model.F(dt_s)
+    turn = CoordinatedTurn(q_accel=MIX_Q, q_turn=0.0)
+    turning = range(K // 3, K // 3 + round(MIX_TURN_S / dt_s))
     T = duration_s
     starts = []
     for i in range(n_targets):
@@ -52,15 +60,13 @@ def mix_truth(*, n_targets: int, dt_s: float, duration_s: float, seed: int) -> l
         starts.append(np.array(x, dtype=np.float64))
     out = []
     for i, x in enumerate(starts):
-        X = np.empty((K, 4))
+        X = np.empty((K, 5))
         for k in range(K):
-            x = F @ x + L @ rng.standard_normal(4)
-            if i == 2 and k == K // 3:
-                c, s = np.cos(np.pi / 3), np.sin(np.pi / 3)
-                x[1], x[3] = c * x[1] - s * x[3], s * x[1] + c * x[3]
-            X[k] = x
+            w = MIX_TURN_RADPS if i == 2 and k in turning else 0.0
+            x = (turn.f(np.append(x, w), dt_s)[:4] if w else F @ x) + L @ rng.standard_normal(4)
+            X[k] = np.append(x, w)
         t = np.array([seconds_to_ns((k + 1) * dt_s) for k in range(K)], dtype=np.int64)
-        out.append(TargetTruth(f"target{i}", t, X, ("x", "vx", "y", "vy")))
+        out.append(TargetTruth(f"target{i}", t, X, ("x", "vx", "y", "vy", "omega")))
     return out
 
 

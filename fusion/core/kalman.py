@@ -8,8 +8,11 @@ Update with z ~ N(h(x), R), H = dh/dx at x-:
     x+ = x- + K y                    P+ = (I - K H) P- (I - K H)' + K R K'   (Joseph form)
     NIS = y' S^-1 y = |L^-1 y|^2     log-likelihood = -(NIS + log det S + m log 2 pi) / 2
 
-The kernels `predict_arrays` and `update_arrays` broadcast over leading dimensions, so a stack
-of N tracks is one call; `KalmanFilter` and `ExtendedKalmanFilter` wrap them for one state.
+Two implementations of the same equations: `predict_arrays` and `update_arrays` broadcast
+over leading dimensions (numpy), so a stack of N tracks is one call (the tracker's batched
+gate); `KalmanFilter` and `ExtendedKalmanFilter` step one state with the compiled kernels of
+fusion.core.compiled, which evaluate the Joseph form expanded, P - K H P - (K H P)' + K S K'
+(algebraically the same as above). The two agree to rounding (tests/core/test_kernels.py).
 """
 
 from __future__ import annotations

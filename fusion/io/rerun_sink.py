@@ -166,7 +166,7 @@ class RerunSink:
         for ev in result.events:
             why = "" if ev.reason is None else f" {ev.reason.value}"
             if ev.retracted:
-                self.log_text(ev.t_ns, f"track {ev.track_id} withdrawn {ev.kind.value}{why} (a replay no longer has it)")
+                self.log_text(ev.t_ns, f"track {ev.track_id} withdrawn {ev.kind.value}{why} (gone after a replay)")
             else:
                 self.log_text(ev.t_ns, f"track {ev.track_id} {ev.kind.value}{why}")
         for rp in result.replays:

@@ -62,7 +62,7 @@ class Codec:
         return key.rsplit("/", 1)[-1]
 
     def detection(self, payload: bytes) -> Detection:
-        """Raises MalformedMessage or InvalidMessage (fusion.errors) for bad bytes."""
+        """Raises MalformedMessageError or InvalidMessageError (fusion.errors) for bad bytes."""
         return detection_of(m.decode_measurement(payload))
 
     def truth(self, payload: bytes, layout: tuple[str, ...]) -> tuple[str, int, np.ndarray] | None:

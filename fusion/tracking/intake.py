@@ -9,10 +9,12 @@ batched:
          now = a + the (k+1)-th largest offset in the window   (k = clock_outliers),
          horizon = max over admissions of (now - lag_s).
      So now follows the freshest data, but k wrong timestamps cannot push it (nor lock the
-     window); after a silence the arrival times (or, without them, k + 1 detections) move it on;
-  3. refused as future when t > now + future_s, as too_late when t < horizon (or before a scan
-     the history had to commit early), as duplicate when (sensor_id, seq, t_ns) was accepted
-     before.
+     window); after a silence the arrival times move it on;
+  3. refused as future when t > now + future_s (with arrival times, a detection judged future
+     is left out of the window; without them the data are the only clock, so it counts, and
+     k + 1 detections that agree on a jump move the clock on), as too_late when t < horizon
+     (or before a scan the history had to commit early), as duplicate when
+     (sensor_id, seq, t_ns) was accepted before.
 """
 
 from __future__ import annotations
@@ -42,6 +44,12 @@ class StreamClock:
         self._window: deque[int] = deque(maxlen=samples)
         self._sorted: list[int] = []
         self._rank = outliers + 1
+
+    def now(self, arrival_ns: int | None) -> int | None:
+        """The clock at an arrival (before the arriving detection counts); None before any data."""
+        if not self._sorted:
+            return None
+        return (0 if arrival_ns is None else arrival_ns) + self._sorted[max(len(self._sorted) - self._rank, 0)]
 
     def observe(self, t_ns: int, arrival_ns: int | None) -> int:
         """Add one detection's offset; return the clock at its arrival."""
@@ -74,12 +82,17 @@ class Intake:
         d, bad = self.validate(d)
         if bad is not None:
             return None, bad
-        now = self.now_ns = self.clock.observe(d.t_ns, d.arrival_ns)
+        if d.arrival_ns is None:  # no other clock: the data's own times, k + 1 that agree move it
+            now = self.now_ns = self.clock.observe(d.t_ns, None)
+        else:  # a detection judged future does not count towards the clock
+            now = self.now_ns = self.clock.now(d.arrival_ns)
+            if now is None or d.t_ns <= now + self.future_ns:
+                now = self.now_ns = self.clock.observe(d.t_ns, d.arrival_ns)
+        if d.t_ns > now + self.future_ns:
+            return None, _no(d, Reason.FUTURE, f"{(d.t_ns - now) / 1e9:.3f} s ahead of the stream's clock")
         h = now - self.lag_ns
         if self.horizon_ns is None or h > self.horizon_ns:
             self.horizon_ns = h
-        if d.t_ns > now + self.future_ns:
-            return None, _no(d, Reason.FUTURE, f"{(d.t_ns - now) / 1e9:.3f} s ahead of the stream's clock")
         if d.t_ns < self.horizon_ns:
             return None, _no(d, Reason.TOO_LATE, f"{(self.horizon_ns - d.t_ns) / 1e9:.3f} s before the "
                              "out-of-order window")

@@ -15,9 +15,10 @@ from fusion.config import (
     TrackerConfig,
 )
 from fusion.core.checks import Array
-from fusion.core.imm import IMM, Filter
+from fusion.core.imm import Filter
 from fusion.core.kalman import ExtendedKalmanFilter
 from fusion.core.measurement import CartesianPosition, MeasurementModel, Radar2D, Radar3D
+from fusion.core.modes import Mode, build_imm, mode_motion
 from fusion.core.motion import ConstantAcceleration, ConstantVelocity, CoordinatedTurn, MotionModel
 from fusion.core.ukf import UnscentedKalmanFilter
 from fusion.errors import ConfigError
@@ -38,12 +39,13 @@ def motion_model(cfg: MotionConfig) -> MotionModel:
         return ConstantAcceleration(ndim=cfg.ndim, q=_q(cfg.accel_psd_m2s3))
     if cfg.model == "ct":
         return CoordinatedTurn(q_accel=_q(cfg.accel_psd_m2s3), q_turn=_q(cfg.turn_psd_rad2s3))
-    return imm_state_model(cfg)
+    modes = imm_modes(cfg)  # an IMM: the first mode's model, in the state space they share
+    return mode_motion(modes[0], ndim=cfg.ndim, turn_state=any(m.kind == "ct" for m in modes))
 
 
-def imm_state_model(cfg: MotionConfig) -> MotionModel:
-    """The state space an IMM's modes share: the coordinated-turn state when a mode turns."""
-    raise ConfigError("IMM motion models need fusion.core.imm.build_imm (not merged yet)")
+def imm_modes(cfg: MotionConfig) -> list[Mode]:
+    return [Mode(kind=m.model, q=_q(m.accel_psd_m2s3), sojourn_s=m.sojourn_s, q_turn=_q(m.turn_psd_rad2s3))
+            for m in cfg.modes]
 
 
 def layout(cfg: MotionConfig) -> tuple[str, ...]:
@@ -57,15 +59,11 @@ def layout(cfg: MotionConfig) -> tuple[str, ...]:
 def make_filter(cfg: MotionConfig) -> Filter:
     """The track filter. Inputs are validated at intake, so the filters skip their checks."""
     if cfg.model == "imm":
-        raise ConfigError("IMM filters need fusion.core.imm.build_imm (not merged yet)")
+        return build_imm(imm_modes(cfg), ndim=cfg.ndim, filter=cfg.filter, check=False)
     m = motion_model(cfg)
     if cfg.filter == "ukf":
         return UnscentedKalmanFilter(m, check=False)
     return ExtendedKalmanFilter(m, check=False)
-
-
-def _is_imm(f: Filter) -> bool:
-    return isinstance(f, IMM)
 
 
 @dataclass(frozen=True)

@@ -147,11 +147,12 @@ class Counts:
     """Cumulative counts of a tracker.
 
     Intake: received = applied + truth + sum(refused.values()) (duplicates are refused with
-    reason "duplicate"; truth samples are counted by the pipeline, 0 in a bare tracker). What the data did (a function of the accepted measurements, whatever their
-    arrival order): updates, births, births_refused_capacity, unassigned, confirmations,
-    deletions by reason, numerical_skips. How the data arrived: replays (calls that rewound),
-    replayed_scans (scans run again), rescans (a newest scan run again with more measurements),
-    late_applied (measurements that landed before the newest scan).
+    reason "duplicate"; truth samples are counted by the pipeline, 0 in a bare tracker).
+    What the data did (a function of the accepted measurements, whatever their arrival order):
+    updates, births, births_refused_capacity, unassigned, confirmations, deletions by reason,
+    numerical_skips. How the data arrived: replays (calls that rewound), replayed_scans (scans
+    run again), rescans (a newest scan run again with more measurements), late_applied
+    (measurements that landed before the newest scan).
     """
 
     received: int = 0

@@ -187,11 +187,9 @@ def _birth(d: Detection, sm: SensorModel, ctx: ScanContext) -> Track:
     P = np.diag(ctx.init_diag)
     P[np.ix_(pi, pi)] = sm.position_cov(d.z, d.R)  # type: ignore[arg-type]
     P = 0.5 * (P + P.T)
-    state: GaussianState | IMMState
-    if isinstance(ctx.filter, IMM):
-        state = ctx.filter.initial(x, P, t_ns=d.t_ns)
-    else:  # x and P are built from validated input: no need to check them again
-        state = GaussianState(x, P, d.t_ns)
+    # x and P are built from validated input: a plain state needs no further checks
+    state: GaussianState | IMMState = (ctx.filter.initial(x, P, t_ns=d.t_ns) if isinstance(ctx.filter, IMM)
+                                       else GaussianState(x, P, d.t_ns))
     tid = track_id_for(d.sensor_id, d.seq, d.t_ns)
     origin = (d.sensor_id, d.seq)
     return Track(tid, state, ctx.lifecycle.born_status(), 1, d.t_ns, origin, origin)

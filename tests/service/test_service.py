@@ -71,7 +71,8 @@ def test_reference_scenario_end_to_end(name: str, tmp_path: Path) -> None:
     assert counts["meas"] == n_meas
     assert len(got) == svc.published > 0, "estimates published and received differ"
     st = svc.status_dict()["counts"]
-    assert st["received"] == n_meas == st["applied"]
+    assert st["applied"] == n_meas and st["truth"] == len(samples) - n_meas
+    assert st["received"] == len(samples)
     # exactly what the tracker produces offline on the same input
     offline = _offline(cfg, tmp_path / "live.fstream")
     assert latest(got) == latest(offline)
@@ -108,7 +109,7 @@ def _rrd_rows(path: Path) -> dict[str, int]:
 def test_replay_equals_live_and_is_deterministic(tmp_path: Path) -> None:
     # 20x real time: small batches, so jittered arrivals reach the tracker late and force replays
     _, _, _, got, svc = _run_live("mix", tmp_path, duration_s=8.0, speed=20.0)
-    assert svc.tracker.counts["late_applied"] > 0, "the mix should deliver late measurements"
+    assert svc.tracker.counts.late_applied > 0, "the mix should deliver late measurements"
     stream = tmp_path / "live.fstream"
     est_a, est_b = tmp_path / "a.jsonl", tmp_path / "b.jsonl"
     ra = replay(stream, out=tmp_path / "a.rrd", estimates=est_a)
@@ -198,7 +199,7 @@ def test_good_and_bad_input(tmp_path: Path) -> None:
     assert refused.pop("malformed", 0) + refused.pop("invalid") == sum(bad_counts[k] for k in ("malformed", "invalid",
                                                                                                "nan"))
     assert refused == {k: v for k, v in bad_counts.items() if k not in ("duplicate", "nan", "invalid", "malformed")}
-    assert c.received == c.applied + c.duplicates + sum(c.refused.values()) + c.queued
+    assert c.received == c.applied + c.truth + c.duplicates + sum(c.refused.values()) + c.queued
     assert c.received == len(stream)
 
 
@@ -216,7 +217,8 @@ def test_status_and_snapshot(tmp_path: Path) -> None:
         finally:
             s.close()
     c = status.counts
-    assert c.received == c.applied + c.duplicates + sum(c.refused.values()) + c.queued == 200
+    assert c.applied == 200
+    assert c.received == c.applied + c.truth + c.duplicates + sum(c.refused.values()) + c.queued == 400
     assert status.tracks == {"confirmed": 1}
     assert status.latency["radar"].count == 200
     assert status.recording is not None and status.recording_bytes > 0

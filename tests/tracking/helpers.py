@@ -7,6 +7,7 @@ from collections.abc import Iterable
 import numpy as np
 
 from fusion.config import LifecycleConfig, MotionConfig, TimeConfig, TrackerConfig
+from fusion.publication import PublishedView
 from fusion.tracking.results import Estimate, StepResult
 from fusion.tracking.tracker import Tracker
 from tests.tracking.streams import Sensor
@@ -32,15 +33,31 @@ def make_tracker(
 
 class Consumer:
     """What a downstream consumer holds: the latest revision per (track_id, t_ns, sensor_id),
-    retracted keys dropped. It also checks that revisions of a key only ever increase."""
+    retracted keys dropped; the events reported and not withdrawn; and, through a
+    PublishedView, what a subscriber of the published estimates holds. It also checks that
+    revisions of a key only ever increase and that only reported events are withdrawn."""
 
     def __init__(self) -> None:
         self.latest: dict[EstimateKey, Estimate] = {}
         self.last_revision: dict[EstimateKey, int] = {}
+        self.events: set[tuple[str, int, int, str]] = set()
+        self.view = PublishedView()
+        self.subscribed: dict[EstimateKey, Estimate] = {}
         self.n_revised = 0
         self.n_retracted = 0
+        self.n_withdrawn = 0
 
     def take(self, result: StepResult) -> None:
+        for ev in result.events:
+            if ev.retracted:
+                assert ev.key in self.events, f"withdrawn but never reported: {ev}"
+                self.events.discard(ev.key)
+                self.n_withdrawn += 1
+            else:
+                assert ev.key not in self.events, f"reported twice: {ev}"
+                self.events.add(ev.key)
+        for e in self.view.select(result.estimates):
+            self.subscribed[e.key] = e
         for e in result.estimates:
             key = (e.track_id, e.t_ns, e.sensor_id)
             prev = self.last_revision.get(key)
@@ -57,6 +74,19 @@ class Consumer:
 
     def snapshot(self) -> dict[EstimateKey, tuple[str, int, bytes, bytes]]:
         return {k: (e.status, e.seq, e.x.tobytes(), e.P.tobytes()) for k, e in sorted(self.latest.items())}
+
+    def published(self) -> dict[EstimateKey, tuple[int, bytes, bytes]]:
+        """The subscriber's view: latest published revision per key, confirmed ones only."""
+        return {k: (e.seq, e.x.tobytes(), e.P.tobytes()) for k, e in sorted(self.subscribed.items())
+                if e.status == "confirmed"}
+
+
+def data_counts(tracker: Tracker) -> dict[str, object]:
+    """The counts that describe what the data did (not how it arrived)."""
+    c = tracker.counts
+    return {"applied": c.applied, "updates": c.updates, "births": c.births, "unassigned": c.unassigned,
+            "births_refused_capacity": c.births_refused_capacity, "confirmations": c.confirmations,
+            "deletions": dict(c.deletions), "numerical_skips": c.numerical_skips}
 
 
 def track_snapshot(tracker: Tracker) -> list[tuple[int, str, int, int, bytes, bytes]]:

@@ -1,12 +1,12 @@
-"""Other filter configurations inside the tracker: the IMM of two CV models (estimates carry
-mode probabilities) and the UKF (on the radar's nonlinear measurements)."""
+"""Other filter configurations inside the tracker: the IMM of constant velocity and coordinated
+turn (estimates carry mode probabilities) and the UKF (on the radar's nonlinear measurements)."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from fusion.config import MotionConfig
+from fusion.config import ModeConfig, MotionConfig
 from fusion.core.metrics import rmse
 from tests.tracking.helpers import Consumer, make_tracker, positions_at
 from tests.tracking.streams import NS_PER_S, Sensor, constant_velocity, detect, in_order, scans
@@ -15,6 +15,12 @@ CART = Sensor("cart", "cartesian", period_s=0.5, std_m=2.0)
 RADAR = Sensor("radar", "radar", period_s=0.5, offset_s=0.25, range_std_m=2.0, bearing_std_rad=0.003,
                position_m=(-600.0, -400.0))
 MANOEUVRE = (0, 15.0, 21.0, 0.25)  # target 0 turns at 0.25 rad/s from 15 s to 21 s (~1.5 rad, 3-4 m/s^2)
+
+
+IMM_CV_CT = MotionConfig(model="imm", modes=[
+    ModeConfig(model="cv", accel_psd_m2s3=0.25, sojourn_s=20.0),
+    ModeConfig(model="ct", accel_psd_m2s3=0.25, turn_psd_rad2s3=0.01, sojourn_s=5.0),
+])
 
 
 def manoeuvring_run(motion: MotionConfig, seed: int, sensors=(CART, RADAR)):
@@ -41,7 +47,7 @@ def manoeuvring_run(motion: MotionConfig, seed: int, sensors=(CART, RADAR)):
 
 @pytest.mark.parametrize("seed", [61, 62], ids=["seed61", "seed62"])
 def test_imm_tracks_through_a_manoeuvre_with_mode_probabilities(seed: int) -> None:
-    tr, consumer, err = manoeuvring_run(MotionConfig(model="imm_cv", q_mps2=0.5, q_high_mps2=8.0), seed)
+    tr, consumer, err = manoeuvring_run(IMM_CV_CT, seed)
     assert len(tr.confirmed()) >= 2  # (seed 62: target 0's track is replaced once in the turn)
     for e in consumer.latest.values():
         mu = e.mode_probabilities

@@ -43,7 +43,8 @@ def one_target(seed: int) -> tuple[Truth, list[Labeled], list[Labeled]]:
 
 
 def run(sensors: list[Sensor], dets: list[Labeled], truth: Truth) -> tuple[float, Consumer, int]:
-    tracker = Tracker(TrackerConfig(sensors=[s.config() for s in sensors], motion=MotionConfig(accel_psd_m2s3=ACCEL_PSD),
+    tracker = Tracker(TrackerConfig(sensors=[s.config() for s in sensors],
+                                    motion=MotionConfig(accel_psd_m2s3=ACCEL_PSD),
                                     gate=GateConfig(probability=GATE_PROBABILITY)))
     consumer = Consumer()
     batches = list(scans(dets))

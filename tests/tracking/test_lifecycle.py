@@ -147,3 +147,53 @@ def test_track_ids_are_never_reused_in_a_run() -> None:
         assert len(ids) == len(set(ids))
     assert len(born) == len(set(born)) > 100
     assert len(gone) > 100
+
+
+def _cam_track_and_a_radar(radar_cfg):
+    """A target at rest seen by a camera every 0.5 s for 3 s, and a radar elsewhere."""
+    from fusion.config import CartesianSensorConfig, TrackerConfig
+    from fusion.tracking.tracker import Tracker
+
+    cfg = TrackerConfig(sensors=[CartesianSensorConfig(id="cam", std_m=[1.0, 1.0]), radar_cfg],
+                        lifecycle=LifecycleConfig(max_misses=10, coast_s=3.0))
+    tr = Tracker(cfg)
+    rng = np.random.default_rng(9)
+    for k in range(7):
+        tr.process([Detection.of("cam", k * S // 2, k, rng.normal(0.0, 1.0, 2))])
+    (track,) = tr.confirmed()
+    return tr, track.id
+
+
+def test_another_sensors_burst_does_not_delete_a_track() -> None:
+    """60 separately timestamped radar returns far away, between two camera scans: the radar
+    never saw the camera's target, so they are no chances for its track (issue #9, defect 7)."""
+    from fusion.config import RadarSensorConfig
+
+    tr, tid = _cam_track_and_a_radar(RadarSensorConfig(id="radar", position_m=[5000.0, 0.0], range_std_m=5.0,
+                                                       bearing_std_rad=0.003))
+    events = []
+    for i in range(60):  # 60 returns in 0.4 s, each its own scan
+        t = 3 * S + (i + 1) * S // 150
+        events += tr.process([Detection.of("radar", t, i, [200.0 + 10.0 * i, 0.5])]).events
+    events += tr.process([Detection.of("cam", 3 * S + S // 2, 7, [0.0, 0.0])]).events
+    assert not [e for e in events if e.track_id == tid and e.kind == "deleted"]
+    assert tid in {t.id for t in tr.confirmed()}
+    i = tr.track_set.index_of(tid)
+    assert tr.track_set.misses[i] == 0 and tr.track_set.chances[i] == 8
+
+
+def test_a_covering_sensor_that_never_sees_the_track_wears_it_down() -> None:
+    """A radar whose declared coverage holds the target but which never detects it: its scans
+    are chances, so the track is deleted after max_misses of them (and only by them: the
+    camera stops reporting, coast_s is long)."""
+    from fusion.config import RadarSensorConfig
+
+    tr, tid = _cam_track_and_a_radar(RadarSensorConfig(id="radar", position_m=[1000.0, 0.0], max_range_m=2000.0,
+                                                       range_std_m=5.0, bearing_std_rad=0.003))
+    deleted_at = None
+    for i in range(12):  # radar scans every 0.1 s, each with one far return only
+        t = 3 * S + (i + 1) * S // 10
+        for e in tr.process([Detection.of("radar", t, i, [1500.0, 3.0])]).events:
+            if e.track_id == tid and e.kind == "deleted":
+                deleted_at, reason = i, e.reason
+    assert deleted_at == 10 and reason == "misses"  # the 11th chance in a row without a hit > max_misses

@@ -2,9 +2,11 @@
 
 A fixed stream (3 targets, one Cartesian sensor and one radar, clutter) is delivered in
 arrival order under random per-detection delays in [0, lag) and random batch sizes. The final
-tracks (ids, counters, state bytes) and the consumer's map of latest estimates per
-(track_id, t_ns, sensor_id), after revisions and retractions, must equal those of the same
-stream delivered in processing order one measurement at a time -- bit for bit.
+tracks (ids, counters, state bytes), the consumer's map of latest estimates per
+(track_id, t_ns, sensor_id) after revisions and retractions, the events it holds after
+withdrawals, the published view a subscriber holds, and the counts of what the data did must
+equal those of the same stream delivered in processing order one measurement at a time -- bit
+for bit.
 """
 
 from __future__ import annotations
@@ -17,7 +19,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from fusion.config import TimeConfig
-from tests.tracking.helpers import Consumer, make_tracker, track_snapshot
+from tests.tracking.helpers import Consumer, data_counts, make_tracker, track_snapshot
 from tests.tracking.streams import Labeled, Sensor, constant_velocity, detect, in_order
 
 SEED = 20240611
@@ -55,15 +57,18 @@ def run(order: list[Labeled], batch_sizes: list[int]):
 @functools.cache
 def reference():
     tracker, consumer = run(list(stream()), [1])
-    return track_snapshot(tracker), consumer.snapshot(), tracker
+    return track_snapshot(tracker), consumer.snapshot(), tracker, consumer
 
 
 def test_reference_stream_is_nontrivial() -> None:
     dets = stream()
     assert 100 <= len(dets) <= 200
     assert any(d.origin < 0 for d in dets) and {d.det.sensor_id for d in dets} == {"cart", "radar"}
-    _tracks, latest, tracker = reference()
+    _tracks, latest, tracker, consumer = reference()
     assert len(tracker.confirmed()) == 3, "the reference run holds the three targets"
+    kinds = {k[0] for k in consumer.events}
+    assert kinds == {"born", "confirmed", "deleted"}, kinds
+    assert len(consumer.published()) > 50
     assert tracker.counts.applied == len(dets)
     assert {k[2] for k in latest} == {"cart", "radar"}
 
@@ -87,13 +92,16 @@ def delays_and_batches():
 def test_arrival_order_does_not_change_the_result(draw: tuple[list[int], list[int]]) -> None:
     delays_ms, batch_sizes = draw
     tracker, consumer = run(arrival_order(delays_ms), batch_sizes)
-    ref_tracks, ref_latest, _ = reference()
+    ref_tracks, ref_latest, ref_tracker, ref_consumer = reference()
     assert tracker.counts.applied == len(stream())
     assert sum(tracker.counts.refused.values()) == 0
     assert track_snapshot(tracker) == ref_tracks
     latest = consumer.snapshot()
     assert latest.keys() == ref_latest.keys()
     assert latest == ref_latest
+    assert consumer.events == ref_consumer.events
+    assert consumer.published() == ref_consumer.published()
+    assert data_counts(tracker) == data_counts(ref_tracker)
 
 
 def test_a_fixed_delay_draw_exercises_replays_and_revisions() -> None:
@@ -103,6 +111,10 @@ def test_a_fixed_delay_draw_exercises_replays_and_revisions() -> None:
     tracker, consumer = run(arrival_order(delays), [3])
     assert tracker.counts.replays > 10
     assert tracker.counts.late_applied > 10
-    assert consumer.n_revised > 0
-    assert track_snapshot(tracker) == reference()[0]
-    assert consumer.snapshot() == reference()[1]
+    assert consumer.n_revised > 0 and consumer.n_withdrawn > 0
+    ref_tracks, ref_latest, ref_tracker, ref_consumer = reference()
+    assert track_snapshot(tracker) == ref_tracks
+    assert consumer.snapshot() == ref_latest
+    assert consumer.events == ref_consumer.events
+    assert consumer.published() == ref_consumer.published()
+    assert data_counts(tracker) == data_counts(ref_tracker)
