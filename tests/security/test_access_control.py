@@ -146,6 +146,9 @@ def test_only_sensors_and_simulators_publish_measurements(certs: Certs, tmp_path
         publish(tls_client(endpoint, certs.tls("simulator")), samples, speed=0.0, match_timeout_s=5.0)
         assert svc.wait_idle(timeout_s=30.0)
         received = svc.status_dict()["counts"]["received"]
+        deadline = time.monotonic() + 5.0
+        while len(seen["recorder"].key_list()) < len(meas) and time.monotonic() < deadline:
+            time.sleep(0.01)
         time.sleep(PROPAGATION_S)
     assert refused_received == 0, "a consumer, recorder or stranger published measurements"
     assert received == len(meas)
