@@ -21,15 +21,15 @@ def _serve(args: argparse.Namespace) -> int:
 
     import msgspec
 
-    from fusion.config import ZenohConfig, load_service_config
+    from fusion.config import load_service_config
     from fusion.service import Service
 
     cfg = load_service_config(args.config)
     if args.listen or args.connect or args.mode:
         z = cfg.zenoh
         mode = args.mode or ("client" if args.connect and not args.listen else z.mode)
-        zc = ZenohConfig(mode=mode, listen=args.listen or (z.listen if mode == "peer" else []),
-                         connect=args.connect or z.connect)
+        zc = msgspec.structs.replace(z, mode=mode, listen=args.listen or (z.listen if mode == "peer" else []),
+                                     connect=args.connect or z.connect)  # keeps [zenoh.tls] and access control
         cfg = msgspec.structs.replace(cfg, zenoh=zc)
     if args.namespace:
         cfg = msgspec.structs.replace(cfg, namespace=args.namespace)
@@ -49,12 +49,10 @@ def _record(args: argparse.Namespace) -> int:
     import zenoh
 
     from fusion.io.recorder import Recorder
-    from fusion.io.zenoh_bus import DEFAULT_ENDPOINT, session_config
+    from fusion.io.zenoh_bus import cli_zenoh_config, zenoh_session_config
 
-    if args.listen:
-        conf = session_config(mode="peer", listen=args.listen, connect=args.connect or [])
-    else:
-        conf = session_config(mode="client", connect=args.connect or [DEFAULT_ENDPOINT])
+    conf = zenoh_session_config(cli_zenoh_config(zenoh_file=args.zenoh_config, listen=args.listen,
+                                                 connect=args.connect))
     stop = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
     signal.signal(signal.SIGINT, lambda *_: stop.set())
@@ -125,6 +123,7 @@ def main(argv: list[str] | None = None) -> int:
     rp.add_argument("--namespace", default="demo")
     rp.add_argument("--connect", action="append", help="zenoh endpoint to connect to (default tcp/127.0.0.1:7447)")
     rp.add_argument("--listen", action="append", help="listen as a peer instead of connecting")
+    rp.add_argument("--zenoh-config", type=Path, help="TOML with a [zenoh] table: endpoints, TLS files, identity")
     rp.add_argument("--duration", type=float, help="stop after this many seconds (default: until Ctrl-C)")
     rp.set_defaults(func=_record)
 

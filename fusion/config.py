@@ -192,14 +192,57 @@ def load_tracker_config(path: str | Path) -> TrackerConfig:
     return decode_tracker_config(Path(path).read_bytes())
 
 
+Ident = Annotated[str, msgspec.Meta(pattern=r"^[A-Za-z0-9_.\-]{1,64}\Z")]  # a sensor id, as in the keys
+CommonName = Annotated[str, msgspec.Meta(min_length=1, max_length=64, pattern=r"^\S(?:.*\S)?\Z")]
+
+
+class TlsConfig(Section):
+    """[zenoh.tls]: TLS on every Zenoh link (paths to PEM files, relative to the working directory).
+
+    With this section every listen and connect endpoint must be `tls/HOST:PORT`, and no other
+    protocol is accepted. root_ca: the CA that signs the other side's certificate. certificate
+    and private_key: this node's own; a listener serves them (required there), a client presents
+    them as its identity. require_client_certificate (listeners): mutual TLS, a client without a
+    certificate signed by root_ca is refused at connection; access control needs it."""
+
+    root_ca: str
+    certificate: str = ""
+    private_key: str = ""
+    require_client_certificate: bool = False
+
+
+class AccessControlConfig(Section):
+    """[zenoh.access_control]: who may do what on fusion/<namespace>/..., enforced by zenoh on the
+    node the others connect to (the service's peer). Identities are TLS client certificate common
+    names, so [zenoh.tls] with require_client_certificate is needed; anyone else may do nothing.
+
+    sensors:    sensor id -> the names that may put fusion/NS/meas/<that id> (and nothing else)
+    simulators: may put any fusion/NS/meas/* and fusion/NS/truth/* (fusion-publish)
+    consumers:  may subscribe fusion/NS/tracks/* and query fusion/NS/status and /snapshot
+    recorders:  may subscribe fusion/NS/meas/* and fusion/NS/truth/* (fusion record)
+    services:   may put tracks and answer status/snapshot; needed only where the rules run on a
+                router the service connects to (the service's own peer never filters itself)"""
+
+    sensors: dict[Ident, list[CommonName]] = {}
+    simulators: list[CommonName] = []
+    consumers: list[CommonName] = []
+    recorders: list[CommonName] = []
+    services: list[CommonName] = []
+
+
 class ZenohConfig(Section):
     """How the service joins Zenoh. The default is an embedded peer that listens on loopback
     only, with multicast and gossip scouting off: nothing else is needed on the machine.
-    mode "client" connects to `connect` endpoints (a router or another peer)."""
+    mode "client" connects to `connect` endpoints (a router or another peer). A listen endpoint
+    off loopback is refused unless allow_remote is true. tls and access_control: see their
+    sections and SECURITY.md."""
 
     mode: Literal["peer", "client"] = "peer"
     listen: list[str] = msgspec.field(default_factory=lambda: ["tcp/127.0.0.1:7447"])
     connect: list[str] = []
+    allow_remote: bool = False
+    tls: TlsConfig | None = None
+    access_control: AccessControlConfig | None = None
 
 
 class RecordingConfig(Section):

@@ -26,7 +26,7 @@ from fusion.config import ServiceConfig
 from fusion.io import wire
 from fusion.io.recording import RotatingSink
 from fusion.io.rerun_sink import RerunSink
-from fusion.io.zenoh_bus import session_config
+from fusion.io.zenoh_bus import zenoh_session_config
 from fusion.pipeline import Pipeline, Record
 from fusion.tracking.detection import Reason
 from fusion.tracking.results import Estimate
@@ -109,7 +109,7 @@ class Service:
     def open(self) -> None:
         """Open the Zenoh session and declare the subscriber and queryables."""
         zc = self.config.zenoh
-        conf = session_config(mode=zc.mode, listen=zc.listen, connect=zc.connect)
+        conf = zenoh_session_config(zc, namespace=self.ns)
         self.session = self._zenoh.open(conf)
         self._refresh_status(force=True)
         s = self.session

@@ -8,7 +8,7 @@ import sys
 import time
 from pathlib import Path
 
-from fusion.io.zenoh_bus import DEFAULT_ENDPOINT, session_config
+from fusion.io.zenoh_bus import DEFAULT_ENDPOINT, cli_zenoh_config, zenoh_session_config
 from publishers.publish import publish
 from publishers.spec import load_scenario_file, scenario_path
 from publishers.stream import build_stream
@@ -25,6 +25,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--duration", type=float, help="stream only the first SECONDS of sensor time")
     p.add_argument("--connect", action="append", help=f"zenoh endpoint to connect to (default {DEFAULT_ENDPOINT})")
     p.add_argument("--listen", action="append", help="listen as a peer instead of connecting")
+    p.add_argument("--zenoh-config", type=Path, help="TOML with a [zenoh] table: endpoints, TLS files, identity")
     p.add_argument("--namespace", help="key namespace (default: the scenario's service namespace)")
     p.add_argument("--relative-time", action="store_true", help="sensor times from 0 instead of the wall clock")
     args = p.parse_args(argv)
@@ -45,10 +46,8 @@ def main(argv: list[str] | None = None) -> int:
     t0 = 0 if args.relative_time else time.time_ns() // 1_000_000 * 1_000_000
     samples, _ = build_stream(spec, namespace=ns, t0_ns=t0)
     speed = 0.0 if args.speed == "max" else float(args.speed)
-    if args.listen:
-        conf = session_config(mode="peer", listen=args.listen, connect=args.connect or [])
-    else:
-        conf = session_config(mode="client", connect=args.connect or [DEFAULT_ENDPOINT])
+    conf = zenoh_session_config(cli_zenoh_config(zenoh_file=args.zenoh_config, listen=args.listen,
+                                                 connect=args.connect))
     import zenoh
 
     with zenoh.open(conf) as session:

@@ -1,0 +1,88 @@
+"""Zenoh access control for fusion: roles of [zenoh.access_control] turned into zenoh's rules.
+
+Zenoh checks every message that crosses a link of the node whose configuration holds the rules
+(the service's peer, or a router), against the identity of the other end: here the common name
+of its TLS client certificate. The default is deny, in both directions, so each role lists what
+it may send to the node (ingress) and what the node may forward to it (egress). A rule key
+allows a message when the rule key includes the message's key (`meas/*` includes `meas/cam1`,
+`meas/cam1` does not include `meas/*`). The node's own session is never filtered: the service
+on its peer publishes and answers without a rule.
+
+With NS the namespace, what each role may do (everything else is dropped):
+
+  sensor X      put fusion/NS/meas/X; see the service's subscription on fusion/NS/meas/*
+                (declare_subscriber, egress) so its publisher matches
+  simulator     put fusion/NS/meas/* and fusion/NS/truth/*; see subscriptions on them
+  consumer      subscribe fusion/NS/tracks/* and receive its puts; query fusion/NS/status and
+                fusion/NS/snapshot and receive the replies
+  recorder      subscribe fusion/NS/meas/* and fusion/NS/truth/* and receive their puts
+  service       put fusion/NS/tracks/*; declare the status and snapshot queryables, receive the
+                queries on them and reply; subscribe measurements and truth and receive their
+                puts (for rules on a router the service connects to)
+
+Hence a sensor cannot forge estimates (its put on tracks is dropped at ingress), cannot answer
+for the service (its status or snapshot queryable is never declared to the node, so no query
+reaches it), cannot read the snapshot, and cannot speak for another sensor; a consumer cannot
+publish measurements.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from fusion.config import AccessControlConfig
+
+PUT, SUB, QUERY, REPLY, QUERYABLE = "put", "declare_subscriber", "query", "reply", "declare_queryable"
+IN, OUT = "ingress", "egress"
+
+
+def _keys(ns: str) -> dict[str, str]:
+    root = f"fusion/{ns}"
+    return {"meas": f"{root}/meas/*", "truth": f"{root}/truth/*", "tracks": f"{root}/tracks/*",
+            "status": f"{root}/status", "snapshot": f"{root}/snapshot"}
+
+
+def role_grants(role: str, ns: str, *, sensor_id: str = "") -> list[tuple[str, str, list[str]]]:
+    """What `role` may do: (message, flow, key expressions) triples, all "allow"."""
+    k = _keys(ns)
+    queries = [k["status"], k["snapshot"]]
+    if role == "sensor":
+        return [(PUT, IN, [f"fusion/{ns}/meas/{sensor_id}"]), (SUB, OUT, [k["meas"]])]
+    if role == "simulator":
+        return [(PUT, IN, [k["meas"], k["truth"]]), (SUB, OUT, [k["meas"], k["truth"]])]
+    if role == "consumer":
+        return [(SUB, IN, [k["tracks"]]), (PUT, OUT, [k["tracks"]]), (QUERY, IN, queries), (REPLY, OUT, queries)]
+    if role == "recorder":
+        return [(SUB, IN, [k["meas"], k["truth"]]), (PUT, OUT, [k["meas"], k["truth"]])]
+    if role == "service":
+        return [(PUT, IN, [k["tracks"]]), (QUERYABLE, IN, queries), (REPLY, IN, queries),
+                (SUB, IN, [k["meas"], k["truth"]]), (PUT, OUT, [k["meas"], k["truth"]]),
+                (QUERY, OUT, queries)]
+    raise ValueError(f"unknown role {role!r}")
+
+
+def access_control_section(ac: AccessControlConfig, *, namespace: str) -> dict[str, Any]:
+    """Zenoh's `access_control` configuration section (a JSON-able dict) for `ac` on `namespace`:
+    default deny; one subject, one policy and its rules per role (per sensor for sensors);
+    roles with no names are left out."""
+    groups: list[tuple[str, str, str, list[str]]] = [  # (id, role, sensor id, common names)
+        (f"sensor-{sid}", "sensor", sid, names) for sid, names in sorted(ac.sensors.items())
+    ]
+    groups += [(role, role, "", names) for role, names in (
+        ("simulator", ac.simulators), ("consumer", ac.consumers), ("recorder", ac.recorders),
+        ("service", ac.services))]
+    rules: list[dict[str, Any]] = []
+    subjects: list[dict[str, Any]] = []
+    policies: list[dict[str, Any]] = []
+    for gid, role, sid, names in groups:
+        if not names:
+            continue
+        ids = []
+        for n, (message, flow, keys) in enumerate(role_grants(role, namespace, sensor_id=sid)):
+            ids.append(f"{gid}-{n}")
+            rules.append({"id": ids[-1], "messages": [message], "flows": [flow], "permission": "allow",
+                          "key_exprs": keys})
+        subjects.append({"id": gid, "cert_common_names": sorted(set(names))})
+        policies.append({"id": gid, "rules": ids, "subjects": [gid]})
+    return {"enabled": True, "default_permission": "deny", "rules": rules, "subjects": subjects,
+            "policies": policies}
