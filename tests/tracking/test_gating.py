@@ -49,7 +49,7 @@ def test_batched_and_per_pair_gates_agree(name: str) -> None:
         assert len(ra) == len(rb)
         for xa, xb in zip(ra, rb, strict=True):
             for va, vb in zip(xa, xb, strict=True):
-                if isinstance(va, np.ndarray) or isinstance(va, float):
+                if isinstance(va, np.ndarray | float):
                     np.testing.assert_allclose(va, vb, rtol=1e-12, atol=1e-12)
                     n += 1
                 else:
