@@ -32,6 +32,9 @@ class MotionModel(ABC):
     position_indices: tuple[int, ...]
     velocity_indices: tuple[int, ...] = ()
     is_linear: bool = False
+    # f, jacobian and Q accept a stack (..., n) with dt of the stack's leading shape: the
+    # tracker then predicts and gates many tracks in one call.
+    broadcasts: bool = False
 
     @abstractmethod
     def f(self, x: Array, dt_s: float | Array) -> Array:
@@ -93,6 +96,8 @@ def _wna_blocks(order: int) -> tuple[Array, list[Array]]:
 
 class _IntegratorChain(LinearMotionModel):
     """d independent axes, each a chain of `order` integrators (CV: 2, CA: 3)."""
+
+    broadcasts = True
 
     def __init__(self, *, ndim: int, order: int, q: float, with_control: bool = False) -> None:
         if ndim not in (1, 2, 3):
@@ -204,6 +209,7 @@ class CoordinatedTurn(MotionModel):
     ndim_state = 5
     position_indices = (0, 2)
     velocity_indices = (1, 3)
+    broadcasts = True
 
     def __init__(self, *, q_accel: float, q_turn: float) -> None:
         if not (q_accel >= 0 and q_turn >= 0 and np.isfinite(q_accel) and np.isfinite(q_turn)):
