@@ -94,9 +94,9 @@ class MeasurementModel(ABC):
         """The measured point in world Cartesian coordinates (for initiation and plots)."""
 
     def position_cov(self, z: Array, R: Array) -> Array:
-        """Covariance of position(z) for z ~ N(z, R): J R J' with J = d position / dz taken by
-        central differences (step 1e-6 max(1, |z_j|)); the built-in models override it with
-        the analytic J."""
+        """Covariance of position(z) for one measurement z (m,) with noise R: J R J' with
+        J = d position / dz by central differences (step 1e-6 max(1, |z_j|)); the built-in
+        models override it with the analytic J."""
         zv = np.asarray(z, dtype=np.float64)
         cols = []
         for j in range(zv.shape[0]):
