@@ -10,13 +10,14 @@ Choices where the documents are silent or contradict themselves (stated once, he
 - maneuver2d, radar2d, cv1d_a: truth is driven by the filter's white-noise-acceleration Q.
 - helix3d (linear): state [x, y, z, vz]; x-y rotate by the known 0.1 rad per step (the
   linearisation about the circle), z climbs at vz; Q = 0.1 I, R = I, P0 = I.
-- helix3d_ekf_doc: the document's nonlinear model exactly as written ([x, y, z, w, a],
-  x' = x - w y dt, y' = y + w x dt, z' = z + w dt, a' = a + alpha dt). It uses one w both as
-  turn rate and climb rate and R = 0.5 I against measurement noise of variance 1, so it cannot be
-  consistent; it is kept to show that a user's model is expressible and tracks.
-- helix3d_ekf: the consistent nonlinear version: state [x, y, z, omega, vz] with an exact
-  rotation by omega dt, Q = diag(0.1, 0.1, 0.1, 1e-6, 1e-4), R = I (the true noise), P0 = I.
-  Its truth is the model itself, driven by that Q, starting on the documented helix.
+- helix3d_ekf_doc: the document's nonlinear model exactly as written, fusion.models.helix.HelixDoc
+  ([x, y, z, w, a], x' = x - w y dt, y' = y + w x dt, z' = z + w dt, a' = a + alpha dt). It uses
+  one w both as turn rate and climb rate and R = 0.5 I against measurement noise of variance 1,
+  so it cannot be consistent; it is kept to show that a user's model is expressible and tracks.
+- helix3d_ekf: the consistent nonlinear version, fusion.models.helix.HelixExact: state
+  [x, y, z, omega, vz] with an exact rotation by omega dt, Q = diag(0.1, 0.1, 0.1, 1e-6, 1e-4) dt,
+  R = I (the true noise), P0 = I. Its truth is the model itself, driven by that Q, starting on
+  the documented helix.
 """
 
 from __future__ import annotations
@@ -29,10 +30,11 @@ from fusion.core.checks import Array
 from fusion.core.imm import IMM, Filter
 from fusion.core.kalman import ExtendedKalmanFilter, KalmanFilter
 from fusion.core.measurement import CartesianPosition, MeasurementModel, Radar2D
-from fusion.core.motion import ConstantVelocity, LinearModel, MotionModel, NonlinearModel
+from fusion.core.motion import ConstantVelocity, LinearModel, MotionModel
 from fusion.core.switching import rates_from_sojourn
 from fusion.core.timebase import seconds_to_ns
 from fusion.errors import ConfigError
+from fusion.models.helix import HelixDoc, HelixExact
 
 REFERENCE_NAMES: tuple[str, ...] = (
     "cv1d_a",
@@ -183,46 +185,6 @@ def _radar2d(rng: np.random.Generator) -> Reference:
     )
 
 
-def helix_rotation_model(*, q_pos: float = 0.1, q_omega: float = 1e-6, q_vz: float = 1e-4) -> NonlinearModel:
-    """[x, y, z, omega, vz]: x-y rotate by omega dt exactly, z climbs at vz."""
-
-    def f(x: Array, dt: float) -> Array:
-        c, s = np.cos(x[3] * dt), np.sin(x[3] * dt)
-        return np.array([c * x[0] - s * x[1], s * x[0] + c * x[1], x[2] + x[4] * dt, x[3], x[4]])
-
-    def jac(x: Array, dt: float) -> Array:
-        c, s = np.cos(x[3] * dt), np.sin(x[3] * dt)
-        return np.array([
-            [c, -s, 0, dt * (-s * x[0] - c * x[1]), 0],
-            [s, c, 0, dt * (c * x[0] - s * x[1]), 0],
-            [0, 0, 1, 0, dt],
-            [0, 0, 0, 1, 0],
-            [0, 0, 0, 0, 1],
-        ])
-
-    Q = np.diag([q_pos, q_pos, q_pos, q_omega, q_vz])
-    return NonlinearModel(f=f, jacobian=jac, Q=lambda x, dt: Q * dt, ndim_state=5, position_indices=(0, 1, 2))
-
-
-def helix_document_model(*, alpha: float = 0.01) -> NonlinearModel:
-    """The source document's model as written: [x, y, z, w, a]."""
-
-    def f(x: Array, dt: float) -> Array:
-        return np.array([x[0] - x[3] * x[1] * dt, x[1] + x[3] * x[0] * dt, x[2] + x[3] * dt, x[3], x[4] + alpha * dt])
-
-    def jac(x: Array, dt: float) -> Array:
-        return np.array([
-            [1, -x[3] * dt, 0, -x[1] * dt, 0],
-            [x[3] * dt, 1, 0, x[0] * dt, 0],
-            [0, 0, 1, dt, 0],
-            [0, 0, 0, 1, 0],
-            [0, 0, 0, 0, 1],
-        ])
-
-    Q = np.diag([0.1, 0.1, 0.1, 0.1, 0.01])
-    return NonlinearModel(f=f, jacobian=jac, Q=lambda x, dt: Q, ndim_state=5, position_indices=(0, 1, 2))
-
-
 def _helix_truth(K: int) -> Array:
     k = np.arange(K + 1)
     th = 0.1 * k
@@ -242,14 +204,14 @@ def _helix(version: str, rng: np.random.Generator) -> Reference:
         x0, P0, layout, name = np.array([0.0, 20.0, 0.0, 0.5]), np.eye(4), ("x", "y", "z", "vz"), "helix3d"
         z = pos[1:] + rng.standard_normal((K, 3))
     elif version == "ekf":
-        motion = helix_rotation_model()
+        motion = HelixExact()
         truth0 = np.array([0.0, 20.0, 0.0, 0.1, 0.5])
         truth = _simulate(motion, truth0, dt, K, rng)
         meas = CartesianPosition(ndim_state=5, indices=(0, 1, 2), R=np.ones(3))
         z = truth[:, :3] + rng.standard_normal((K, 3))
         x0, P0, layout, name = truth0.copy(), np.eye(5), ("x", "y", "z", "omega", "vz"), "helix3d_ekf"
     else:
-        motion = helix_document_model()
+        motion = HelixDoc()
         truth0 = np.array([0.0, 20.0, 0.0, 0.1, 0.5])  # true turn rate and climb rate
         truth = np.hstack([pos[1:], np.tile([0.1, 0.5], (K, 1))])
         meas = CartesianPosition(ndim_state=5, indices=(0, 1, 2), R=[0.5, 0.5, 0.5])

@@ -1,4 +1,5 @@
-"""Layering: the estimation core and the scenarios load no I/O library (zenoh, rerun, msgspec).
+"""Layering: the estimation core, fusion.models and the scenarios load no I/O library (zenoh, rerun,
+msgspec).
 
 Checked in a fresh interpreter, so that nothing the test session imported leaks in.
 """
@@ -19,15 +20,19 @@ FORBIDDEN = ("zenoh", "rerun", "msgspec")
 
 def _core_modules() -> list[str]:
     import fusion.core
+    import fusion.models
 
     names = [f"fusion.core.{m.name}" for m in pkgutil.iter_modules(fusion.core.__path__)]
-    return [*sorted(names), "fusion.core", "fusion.errors", "fusion.scenarios"]
+    names += [f"fusion.models.{m.name}" for m in pkgutil.iter_modules(fusion.models.__path__)]
+    return [*sorted(names), "fusion.core", "fusion.models", "fusion.errors", "fusion.scenarios"]
 
 
 def test_core_module_list_is_complete() -> None:
     mods = _core_modules()
     for expected in ("kalman", "ukf", "imm", "motion", "measurement", "gaussian", "checks"):
         assert f"fusion.core.{expected}" in mods, mods
+    for expected in ("helix", "loader"):
+        assert f"fusion.models.{expected}" in mods, mods
 
 
 @pytest.mark.parametrize("target", ["all", "fusion.core", "fusion.scenarios"])

@@ -43,6 +43,7 @@ class ConstantVelocityWithTurnRate(LinearMotionModel):
     ndim_state = 5
     position_indices = (0, 2)
     velocity_indices = (1, 3)
+    broadcasts = True
 
     def __init__(self, *, q_accel: float, q_turn: float = 0.0) -> None:
         if not (np.isfinite(q_turn) and q_turn >= 0):

@@ -12,6 +12,7 @@ dt = 0 does not switch at all. For small dt, Pi(dt) ~ I + Lambda dt.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 
 import numpy as np
@@ -60,11 +61,23 @@ def check_rates(rates: ArrayLike, M: int | None = None) -> Array:
 
 
 def transition_matrix(rates: Array, dt_s: float) -> Array:
-    """Pi(dt) = expm(Lambda dt), clipped at 0 and renormalised per row (the matrix exponential
-    of a rate matrix is stochastic; this removes rounding of order 1e-16)."""
+    """Pi(dt) = expm(Lambda dt).
+
+    Two modes with exit rates a = Lambda_01, b = Lambda_10 have the closed form
+        Pi_01 = a / (a + b) (1 - exp(-(a + b) dt)),   Pi_10 = b / (a + b) (1 - exp(-(a + b) dt))
+    (1.6-2.2 us against 100-280 us for scipy's expm on a 2 x 2, measured here). Otherwise expm, clipped
+    at 0 and renormalised per row (removing rounding of order 1e-16).
+    """
     if not dt_s >= 0.0:
         raise TimeError(f"switching over a negative or NaN time step: dt_s = {dt_s}")
+    M = rates.shape[0]
     if dt_s == 0.0:
-        return np.eye(rates.shape[0])
+        return np.eye(M)
+    if M == 2:
+        a, b = float(rates[0, 1]), float(rates[1, 0])
+        if a + b == 0.0:
+            return np.eye(2)
+        g = -math.expm1(-(a + b) * dt_s) / (a + b)  # (1 - exp(-(a + b) dt)) / (a + b)
+        return np.array([[1.0 - a * g, a * g], [b * g, 1.0 - b * g]])
     Pi = np.maximum(expm(rates * dt_s), 0.0)
     return Pi / Pi.sum(axis=1, keepdims=True)

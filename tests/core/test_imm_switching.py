@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from scipy.linalg import expm
 
 from fusion.core.imm import IMM
 from fusion.core.kalman import KalmanFilter
@@ -41,6 +42,15 @@ def test_transition_matrix_is_a_semigroup_of_stochastic_matrices(seed: int, M: i
             rtol=1e-12, atol=1e-14, err_msg=f"seed={seed} a={a} b={b}")
     # small dt: Pi ~ I + Lambda dt
     np.testing.assert_allclose(transition_matrix(L, 1e-6), np.eye(M) + L * 1e-6, atol=1e-11)
+
+
+@pytest.mark.parametrize("M", (2, 3), ids=["M2_closed_form", "M3_expm"])
+def test_equals_scipy_expm(M: int) -> None:
+    L = _random_rates(np.random.default_rng(11), M)
+    for dt in DTS:
+        np.testing.assert_allclose(transition_matrix(L, dt), expm(L * dt), rtol=1e-12, atol=1e-15,
+                                   err_msg=f"seed=11 dt={dt}")
+    np.testing.assert_array_equal(transition_matrix(np.zeros((2, 2)), 3.0), np.eye(2))
 
 
 def test_two_mode_closed_form() -> None:

@@ -12,7 +12,7 @@ import pytest
 
 from fusion.core.measurement import Radar2D, Radar3D
 from fusion.core.motion import CoordinatedTurn
-from fusion.scenarios import helix_document_model, helix_rotation_model
+from fusion.models.helix import HelixDoc, HelixExact
 
 
 def _fd(fun, x: np.ndarray, rel: float = 1e-6) -> np.ndarray:
@@ -175,7 +175,7 @@ def test_radar_jacobian_batched() -> None:
 
 # --- helix models -----------------------------------------------------------------------------
 
-HELIX = {"rotation": helix_rotation_model(), "document": helix_document_model()}
+HELIX = {"rotation": HelixExact(), "document": HelixDoc()}
 HELIX_STATES = {
     "start": np.array([0.0, 20.0, 0.0, 0.1, 0.5]),
     "elsewhere": np.array([-13.0, 7.0, 21.0, -0.4, 1.3]),
