@@ -27,8 +27,9 @@ class Section(msgspec.Struct, frozen=True, forbid_unknown_fields=True, kw_only=T
 
 
 class _SensorBase(Section, tag_field="kind"):
-    """What every sensor has: an id, a pose in the world frame (position_m, heading_rad about
-    the vertical axis) and an optional coverage. A sensor "could have seen" a track when the
+    """What every sensor has: an id, a pose in the world frame (position_m; heading_rad about
+    the vertical axis, and in 3-D pitch_rad and roll_rad) and an optional coverage. A sensor
+    measures in its own frame: world point = Rot z + position_m. A sensor "could have seen" a track when the
     track's predicted position lies in its coverage; without a coverage, when the sensor has
     updated that track before. Only such sensors' scans count as chances (and misses) for a
     track's confirmation and deletion."""
@@ -36,6 +37,8 @@ class _SensorBase(Section, tag_field="kind"):
     id: SensorId
     position_m: list[Coord] = []
     heading_rad: Angle = 0.0
+    pitch_rad: Angle = 0.0  # 3-D sensors only (fusion.core.pose: Rot = Rz(heading) Ry(pitch) Rx(roll))
+    roll_rad: Angle = 0.0
     max_range_m: PosFloat | None = None  # coverage: distance from position_m
     region_m: list[Coord] = []  # coverage: [xmin, xmax, ymin, ymax(, zmin, zmax)] in the world frame
 
@@ -171,6 +174,10 @@ class TrackerConfig(Section):
                 raise ValueError(f"sensor {s.id}: a radar needs a 2-D or 3-D state (motion.ndim)")
             if s.position_m and len(s.position_m) != d:
                 raise ValueError(f"sensor {s.id}: position_m must have {d} components")
+            if d == 1 and s.heading_rad:
+                raise ValueError(f"sensor {s.id}: a 1-D sensor has no heading (give position_m only)")
+            if d < 3 and (s.pitch_rad or s.roll_rad):
+                raise ValueError(f"sensor {s.id}: pitch_rad and roll_rad need a 3-D state (motion.ndim = 3)")
             if s.region_m and len(s.region_m) != 2 * d:
                 raise ValueError(f"sensor {s.id}: region_m must have {2 * d} values [min, max per axis]")
             if isinstance(s, CartesianSensorConfig) and s.std_m is not None and len(s.std_m) != d:

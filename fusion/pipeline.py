@@ -48,7 +48,7 @@ class Codec(Protocol):
         """The sensor or target id a key names (its last segment)."""
         ...
 
-    def detection(self, payload: bytes) -> Detection: ...
+    def detection(self, payload: bytes, arrival_ns: int | None = None) -> Detection: ...
 
     def truth(self, payload: bytes, layout: tuple[str, ...]) -> tuple[str, int, np.ndarray] | None:
         """(target_id, t_ns, state in `layout`), None when the truth lacks a component."""
@@ -116,7 +116,7 @@ class Pipeline:
             if kind != "meas":
                 self._refuse(Reason.INVALID, key, "not a measurement or truth key")
                 return None
-            d = self.codec.detection(payload)
+            d = self.codec.detection(payload, arrival_ns)
         except MalformedMessageError as e:
             self._refuse(Reason.MALFORMED, key, str(e))
             return None
@@ -137,7 +137,7 @@ class Pipeline:
             return None
         if d.sensor_id in self.tracker.sensors:
             self.latency.add(d.sensor_id, arrival_ns - d.t_ns)
-        return dataclasses.replace(d, arrival_ns=arrival_ns)
+        return d
 
     def ingest(self, records: Sequence[Record]) -> Output:
         """Process samples in arrival order; return the tracker's result and what to publish."""

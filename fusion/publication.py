@@ -38,13 +38,19 @@ class PublishedView:
     def snapshot(self, tracks: TrackSet) -> list[Estimate]:
         """The latest published estimate of each live confirmed track, by track id."""
         out = []
-        for t in tracks.tracks:
-            if t.status != Status.CONFIRMED:
-                continue
-            e = self.latest.get((t.id, t.state.t_ns, t.last[0]))
+        for k in self._current(tracks, confirmed_only=True):
+            e = self.latest.get(k)
             if e is not None and e.status == "confirmed":
                 out.append(e)
         return sorted(out, key=lambda e: e.track_id)
+
+    @staticmethod
+    def _current(tracks: TrackSet, *, confirmed_only: bool = False) -> set[EstimateKey]:
+        """The key of every live track's current estimate: (id, time and sensor of its last update)."""
+        names = tracks.layout.sensors
+        rows = range(len(tracks))
+        return {(int(tracks.ids[i]), int(tracks.t_ns[i]), names[int(tracks.last_sensor[i])]) for i in rows
+                if not confirmed_only or tracks.status[i] == Status.CONFIRMED}
 
     def prune(self, horizon_ns: int | None, tracks: TrackSet, *, every_ns: int = 1_000_000_000) -> None:
         """Forget keys before the horizon (they can no longer be revised) unless they hold a live
@@ -52,6 +58,6 @@ class PublishedView:
         if horizon_ns is None or (self._pruned_at is not None and horizon_ns - self._pruned_at < every_ns):
             return
         self._pruned_at = horizon_ns
-        current = {(t.id, t.state.t_ns, t.last[0]) for t in tracks.tracks}
+        current = self._current(tracks)
         for k in [k for k in self.latest if k[1] < horizon_ns and k not in current]:
             del self.latest[k]

@@ -67,6 +67,9 @@ def gnn_assign(
         return []
     cost = np.asarray(cost, dtype=np.float64)
     limit = np.asarray(limit, dtype=np.float64)
+    if np.bincount(ti).max() == 1 and np.bincount(mj).max() == 1:  # every pair its own component
+        take = cost < limit
+        return sorted(zip(ti[take].tolist(), mj[take].tolist(), strict=True), key=lambda p: (p[1], p[0]))
     g = coo_matrix((np.ones(ti.size), (ti, n_tracks + mj)), shape=(n_tracks + n_meas,) * 2)
     _, labels = connected_components(g, directed=False)
     comp = labels[ti]

@@ -56,9 +56,12 @@ def combine(xs: Array, Ps: Array, mu: Array) -> tuple[Array, Array]:
 
 @dataclass(frozen=True, slots=True)
 class IMMState:
-    """Per-model states, mode probabilities mu, and their moment-matched combination (x, P)."""
+    """Per-model states (means xs (M, n), covariances Ps (M, n, n), kept stacked so that many
+    tracks stack without unpacking), mode probabilities mu, and their moment-matched
+    combination (x, P)."""
 
-    components: tuple[GaussianState, ...]
+    xs: Array
+    Ps: Array
     mu: Array
     x: Array
     P: Array
@@ -69,7 +72,12 @@ class IMMState:
         xs = np.stack([c.x for c in components])
         Ps = np.stack([c.P for c in components])
         x, P = combine(xs, Ps, mu)
-        return cls(tuple(components), mu, x, P, components[0].t_ns)
+        return cls(xs, Ps, mu, x, P, components[0].t_ns)
+
+    @property
+    def components(self) -> tuple[GaussianState, ...]:
+        """Each model's state."""
+        return tuple(GaussianState(self.xs[j], self.Ps[j], self.t_ns) for j in range(self.xs.shape[0]))
 
     @property
     def ndim(self) -> int:
@@ -132,8 +140,7 @@ class IMM:
         T = self.transition(dt)
         c = state.mu @ T
         W = (T * state.mu[:, None]) / np.where(c > 0, c, 1.0)  # W[i, j] = w_ij
-        xs = np.stack([s.x for s in state.components])
-        Ps = np.stack([s.P for s in state.components])
+        xs, Ps = state.xs, state.Ps
         out = []
         for j, f in enumerate(self.filters):
             x0, P0 = combine(xs, Ps, W[:, j])

@@ -25,7 +25,7 @@ def is_measurement_key(key: str) -> bool:
     return "/meas/" in key
 
 
-def detection_of(msg: m.Measurement) -> Detection:
+def detection_of(msg: m.Measurement, arrival_ns: int | None = None) -> Detection:
     """The tracker's view of a wire measurement: z and R in the sensor's measurement space."""
     d = msg.data
     if isinstance(d, m.Cartesian):
@@ -46,7 +46,7 @@ def detection_of(msg: m.Measurement) -> Detection:
             var.append(d.range_rate_std_mps**2)  # type: ignore[operator]
         z = np.array(vals, dtype=np.float64)
         R = np.diag(var)
-    return Detection(msg.sensor_id, msg.t_ns, msg.seq, z, R)
+    return Detection(msg.sensor_id, msg.t_ns, msg.seq, z, R, arrival_ns)
 
 
 class Codec:
@@ -61,9 +61,9 @@ class Codec:
     def key_id(self, key: str) -> str:
         return key.rsplit("/", 1)[-1]
 
-    def detection(self, payload: bytes) -> Detection:
+    def detection(self, payload: bytes, arrival_ns: int | None = None) -> Detection:
         """Raises MalformedMessageError or InvalidMessageError (fusion.errors) for bad bytes."""
-        return detection_of(m.decode_measurement(payload))
+        return detection_of(m.decode_measurement(payload), arrival_ns)
 
     def truth(self, payload: bytes, layout: tuple[str, ...]) -> tuple[str, int, np.ndarray] | None:
         return truth_in_layout(m.decode_truth(payload), layout)

@@ -8,8 +8,10 @@ passes the gate. For an IMM, S and NIS are those of the mixture and ln det S is 
 -2 log L - m ln 2 pi - NIS with L the mixture likelihood.
 
 Two implementations behind one interface, chosen once from a capability:
-- Batched: an EKF over a motion model that broadcasts over stacks (`MotionModel.broadcasts`):
-  every pair of a scan in one stacked predict + update per measurement dimension;
+- Batched: an EKF over a motion model that broadcasts over stacks (`MotionModel.broadcasts`),
+  or an IMM of such EKFs (fusion.core.imm_stack): each candidate track predicted once, every
+  pair of a scan updated in one compiled call per measurement dimension (the filters' own
+  compiled kernels, looped: fusion.core.compiled_stack);
 - PerPair: one filter predict per track and one update per pair (any filter: UKF, IMM, a
   model that takes one state at a time).
 They agree to 1e-12 where both apply (tested).
@@ -18,16 +20,18 @@ They agree to 1e-12 where both apply (tested).
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from abc import ABC, abstractmethod
 from dataclasses import dataclass
 from typing import Protocol
 
 import numpy as np
 
 from fusion.core.checks import Array
+from fusion.core.compiled_stack import predict_stack, update_stack
 from fusion.core.gaussian import GaussianState, Update
-from fusion.core.imm import Filter, IMMState
-from fusion.core.kalman import ExtendedKalmanFilter, predict_arrays, update_arrays
+from fusion.core.imm import IMM, Filter, IMMState
+from fusion.core.imm_stack import StackPrediction, predict_imm, stackable, update_imm
+from fusion.core.kalman import ExtendedKalmanFilter
 from fusion.core.measurement import MeasurementModel
 from fusion.errors import NumericalError
 from fusion.tracking.trackset import TrackSet
@@ -35,17 +39,40 @@ from fusion.tracking.trackset import TrackSet
 LOG_2PI = math.log(2.0 * math.pi)
 
 
-@dataclass(frozen=True, slots=True)
-class PairUpdate:
-    """The filter's answer for one kept pair: posterior, prior and innovation."""
+@dataclass(frozen=True)
+class Part:
+    """The filter's answers for k pairs of one measurement dimension, stacked: posterior X, P
+    (and for an IMM the modes' MX, MP, MU), prior (prediction) x, P, innovation y, its
+    covariance S, the measurement Jacobian H at the prior, and NIS."""
 
-    state: GaussianState | IMMState
+    X: Array
+    P: Array
     prior_x: Array
     prior_P: Array
     y: Array
     S: Array
     H: Array
-    nis: float
+    nis: Array
+    MX: Array | None = None
+    MP: Array | None = None
+    MU: Array | None = None
+
+
+@dataclass(frozen=True)
+class Taken:
+    """Posteriors of the chosen pairs, in the order asked: stacked states, and per pair the
+    review arrays (their shapes differ with the measurement's dimension)."""
+
+    X: Array
+    P: Array
+    MX: Array | None
+    MP: Array | None
+    MU: Array | None
+    prior_x: list[Array]
+    prior_P: list[Array]
+    y: list[Array]
+    S: list[Array]
+    H: list[Array]
 
 
 @dataclass(frozen=True)
@@ -59,19 +86,41 @@ class Measured:
 
 @dataclass(frozen=True)
 class Gated:
-    """Kept pairs, sorted by (measurement, track): indices, NIS, cost and limit per pair, and
-    their updates (built on demand: only assigned pairs become objects)."""
+    """Kept pairs, sorted by (measurement, track): indices, NIS, cost and limit per pair; pair
+    p's answer is row where[p][1] of parts[where[p][0]]."""
 
     ti: np.ndarray
     mj: np.ndarray
     nis: np.ndarray
     cost: np.ndarray
     limit: np.ndarray
-    updates: Sequence[PairUpdate] | _Lazy
+    parts: list[Part]
+    where: np.ndarray  # (pairs, 2): part, row
     numerical_skips: int
 
-    def update(self, p: int) -> PairUpdate:
-        return self.updates[p]
+    def take(self, pairs: list[int]) -> Taken:
+        """The chosen pairs' answers, gathered from the stacks."""
+        n = self.parts[0].X.shape[1] if self.parts else 0
+        k = len(pairs)
+        imm = bool(self.parts) and self.parts[0].MX is not None
+        X, P = np.empty((k, n)), np.empty((k, n, n))
+        MX = MP = MU = None
+        if imm:
+            M = self.parts[0].MX.shape[1]  # type: ignore[union-attr]
+            MX, MP, MU = np.empty((k, M, n)), np.empty((k, M, n, n)), np.empty((k, M))
+        where = self.where[pairs] if k else np.zeros((0, 2), dtype=np.intp)
+        px: list[Array] = [None] * k  # type: ignore[list-item]
+        pP, ys, Ss, Hs = list(px), list(px), list(px), list(px)
+        for g in np.unique(where[:, 0]).tolist():
+            at = np.flatnonzero(where[:, 0] == g)
+            rows = where[at, 1]
+            part = self.parts[g]
+            X[at], P[at] = part.X[rows], part.P[rows]
+            if imm:
+                MX[at], MP[at], MU[at] = part.MX[rows], part.MP[rows], part.MU[rows]  # type: ignore[index]
+            for a, r in zip(at.tolist(), rows.tolist(), strict=True):
+                px[a], pP[a], ys[a], Ss[a], Hs[a] = part.prior_x[r], part.prior_P[r], part.y[r], part.S[r], part.H[r]
+        return Taken(X, P, MX, MP, MU, px, pP, ys, Ss, Hs)
 
 
 class Gater(Protocol):
@@ -79,17 +128,49 @@ class Gater(Protocol):
 
 
 def make_gater(filt: Filter, thresholds: dict[int, float]) -> Gater:
-    """The batched gate where the filter and its motion model allow it, else pair by pair."""
+    """The batched gate where the filter and its motion models allow it, else pair by pair.
+    (A measurement model that takes one state at a time falls back to pairs within a scan.)"""
     if isinstance(filt, ExtendedKalmanFilter) and filt.motion.broadcasts:
         return BatchedGate(filt, thresholds)
+    if isinstance(filt, IMM) and stackable(filt):
+        return BatchedIMMGate(filt, thresholds)
     return PerPairGate(filt, thresholds)
 
 
-def _kept(rows: list[tuple[int, int, float, float, float]], updates: list, skips: int) -> Gated:
-    order = sorted(range(len(rows)), key=lambda k: (rows[k][1], rows[k][0]))
-    a = np.array([rows[k] for k in order], dtype=np.float64).reshape(len(rows), 5)
-    return Gated(a[:, 0].astype(np.intp), a[:, 1].astype(np.intp), a[:, 2], a[:, 3], a[:, 4],
-                 [updates[k] for k in order], skips)
+class _Kept:
+    """Collects kept pairs: (track, measurement, NIS, cost, limit) and where each answer lives."""
+
+    def __init__(self) -> None:
+        self.rows: list[tuple[int, int, float, float, float]] = []
+        self.where: list[tuple[int, int]] = []
+        self.parts: list[Part] = []
+        self.skips = 0
+
+    def add_part(self, ti: np.ndarray, mj: np.ndarray, nis: Array, ll: Array, dim: int, g: float,
+                 part: Part) -> None:
+        """Pairs (ti[k], mj[k]) answered by row k of `part`; the ones inside the gate are kept."""
+        cost = -2.0 * ll - dim * LOG_2PI
+        self.parts.append(part)
+        g_idx = len(self.parts) - 1
+        for k in np.flatnonzero(nis <= g).tolist():
+            self.rows.append((int(ti[k]), int(mj[k]), float(nis[k]), float(cost[k]), float(cost[k] - nis[k] + g)))
+            self.where.append((g_idx, k))
+
+    def add_gated(self, sub: Gated) -> None:
+        base = len(self.parts)
+        self.parts.extend(sub.parts)
+        self.skips += sub.numerical_skips
+        for p in range(sub.ti.size):
+            self.rows.append((int(sub.ti[p]), int(sub.mj[p]), float(sub.nis[p]), float(sub.cost[p]),
+                              float(sub.limit[p])))
+            self.where.append((base + int(sub.where[p, 0]), int(sub.where[p, 1])))
+
+    def done(self) -> Gated:
+        order = sorted(range(len(self.rows)), key=lambda k: (self.rows[k][1], self.rows[k][0]))
+        a = np.array([self.rows[k] for k in order], dtype=np.float64).reshape(len(self.rows), 5)
+        w = np.array([self.where[k] for k in order], dtype=np.intp).reshape(len(self.rows), 2)
+        return Gated(a[:, 0].astype(np.intp), a[:, 1].astype(np.intp), a[:, 2], a[:, 3], a[:, 4], self.parts, w,
+                     self.skips)
 
 
 class PerPairGate:
@@ -101,99 +182,106 @@ class PerPairGate:
 
     def gate(self, ts: TrackSet, t_ns: int, ci: np.ndarray, cj: np.ndarray, meas: Measured) -> Gated:
         preds: dict[int, GaussianState | IMMState] = {}
-        rows: list[tuple[int, int, float, float, float]] = []
-        ups: list[PairUpdate] = []
-        skips = 0
+        kept = _Kept()
         for i, j in zip(ci.tolist(), cj.tolist(), strict=True):
             pred = preds.get(i)
             if pred is None:
-                pred = preds[i] = self.filter.predict(ts.tracks[i].state, t_ns)  # type: ignore[arg-type]
+                pred = preds[i] = self.filter.predict(ts.state(i), t_ns)  # type: ignore[arg-type]
             model = meas.models[j]
             try:
                 up: Update = self.filter.update(pred, meas.z[j], model, R=meas.R[j])  # type: ignore[arg-type]
             except NumericalError:
-                skips += 1
+                kept.skips += 1
                 continue
             g = self.g[model.ndim_meas]
             if up.nis <= g:
-                cost = -2.0 * up.log_likelihood - model.ndim_meas * LOG_2PI
-                rows.append((i, j, up.nis, cost, cost - up.nis + g))
-                ups.append(PairUpdate(up.state, pred.x, pred.P, up.y, up.S, model.jacobian(pred.x), up.nis))
-        return _kept(rows, ups, skips)
+                st = up.state
+                imm = isinstance(st, IMMState)
+                part = Part(st.x[None], st.P[None], pred.x[None], pred.P[None], up.y[None], up.S[None],
+                            model.jacobian(pred.x)[None], np.array([up.nis]),
+                            *((st.xs[None], st.Ps[None], st.mu[None]) if imm else ()))  # type: ignore[union-attr]
+                kept.add_part(np.array([i]), np.array([j]), np.array([up.nis]), np.array([up.log_likelihood]),
+                              model.ndim_meas, g, part)
+        return kept.done()
 
 
-class _Lazy:
-    """Updates of the batched gate kept as stacks (group g, row k); `[p]` builds pair p's
-    PairUpdate. Group -1 holds the few built pair by pair after a numerical fallback."""
+class _Batched(ABC):
+    """The shared driver of the batched gates: predict each candidate track once, group the
+    candidate pairs by measurement dimension, run the stacked update per group, keep the pairs
+    inside the gate."""
 
-    def __init__(self, t_ns: int, parts: list[tuple[np.ndarray, ...]], fallback: list[PairUpdate],
-                 where: list[tuple[int, int]]) -> None:
-        self.t_ns, self.parts, self.fallback, self.where = t_ns, parts, fallback, where
-
-    def __getitem__(self, p: int) -> PairUpdate:
-        g, k = self.where[p]
-        if g < 0:
-            return self.fallback[k]
-        Xn, Pn, Xp, Pp, Y, S, H, nis = self.parts[g]
-        # copies: a checkpointed state must not keep the whole stack alive
-        return PairUpdate(GaussianState(Xn[k].copy(), Pn[k].copy(), self.t_ns), Xp[k], Pp[k], Y[k], S[k], H[k],
-                          float(nis[k]))
-
-
-class BatchedGate:
-    """Every candidate pair at once: the EKF equations of fusion.core.kalman on stacks, grouped
-    by measurement dimension. Same math as PerPairGate."""
-
-    def __init__(self, filt: ExtendedKalmanFilter, thresholds: dict[int, float]) -> None:
+    def __init__(self, filt: Filter, thresholds: dict[int, float]) -> None:
         self.filter = filt
-        self.motion = filt.motion
         self.g = thresholds
         self._each = PerPairGate(filt, thresholds)
 
+    @abstractmethod
+    def _predict(self, ts: TrackSet, t_ns: int, tracks: np.ndarray) -> object:
+        """The prediction of tracks (indices into ts) to t_ns, as stacks."""
+
+    @abstractmethod
+    def _update(self, pred: object, rows: np.ndarray, Z: Array, R: Array, model: MeasurementModel
+                ) -> tuple[Array, Part]:
+        """(log-likelihood, the stacked answers) for predicted rows `rows` and measurements Z."""
+
     def gate(self, ts: TrackSet, t_ns: int, ci: np.ndarray, cj: np.ndarray, meas: Measured) -> Gated:
+        kept = _Kept()
         if ci.size == 0:
-            return _kept([], [], 0)
-        m = self.motion
-        X = np.stack([ts.tracks[i].state.x for i in ci.tolist()])
-        P = np.stack([ts.tracks[i].state.P for i in ci.tolist()])
-        dt = (t_ns - ts.t_ns[ci]) * 1e-9
-        F = m.jacobian(X, dt)
-        Xp, Pp = predict_arrays(X, P, F, m.Q(X, dt), None if m.is_linear else m.f(X, dt))
+            return kept.done()
+        tracks, row = np.unique(ci, return_inverse=True)  # predict each candidate track once
+        pred = self._predict(ts, t_ns, tracks)
         dims = np.array([meas.models[j].ndim_meas for j in cj.tolist()])
-        rows: list[tuple[int, int, float, float, float]] = []
-        where: list[tuple[int, int]] = []
-        parts: list[tuple[np.ndarray, ...]] = []
-        fallback: list[PairUpdate] = []
-        skips = 0
         for dim in np.unique(dims).tolist():
             sel = np.flatnonzero(dims == dim)
             js = cj[sel]
             model = meas.models[int(js[0])]  # one model per dimension and sensor: pairs differ by z and R
-            Z = np.stack([meas.z[j] for j in js.tolist()])
-            R = np.stack([meas.R[j] for j in js.tolist()])
-            Xs, Ps = Xp[sel], Pp[sel]
-            Y = model.residual(Z, model.h(Xs))
-            H = np.broadcast_to(model.jacobian(Xs), (sel.size, dim, Xs.shape[1]))
             try:
-                Xn, Pn, S, nis, ll = update_arrays(Xs, Ps, Y, H, R)
-            except NumericalError:  # a non-PD S somewhere in the group: pair by pair, skipping it
-                sub = self._each.gate(ts, t_ns, ci[sel], js, meas)
-                skips += sub.numerical_skips
-                for p in range(sub.ti.size):
-                    rows.append((int(sub.ti[p]), int(sub.mj[p]), float(sub.nis[p]), float(sub.cost[p]),
-                                 float(sub.limit[p])))
-                    where.append((-1, len(fallback)))
-                    fallback.append(sub.update(p))
+                if not model.broadcasts:
+                    raise NumericalError("not stackable")
+                ll, part = self._update(pred, row[sel], np.stack([meas.z[j] for j in js.tolist()]),
+                                        np.stack([meas.R[j] for j in js.tolist()]), model)
+            except NumericalError:  # a non-PD S somewhere in the group, or a model that takes one state
+                kept.add_gated(self._each.gate(ts, t_ns, ci[sel], js, meas))
                 continue
-            g = self.g[dim]
-            cost = -2.0 * ll - dim * LOG_2PI
-            ok = np.flatnonzero(nis <= g)
-            parts.append((Xn, Pn, Xs, Ps, Y, S, H, nis))
-            for k in ok.tolist():
-                p = sel[k]
-                rows.append((int(ci[p]), int(cj[p]), float(nis[k]), float(cost[k]), float(cost[k] - nis[k] + g)))
-                where.append((len(parts) - 1, k))
-        order = sorted(range(len(rows)), key=lambda k: (rows[k][1], rows[k][0]))
-        a = np.array([rows[k] for k in order], dtype=np.float64).reshape(len(rows), 5)
-        lazy = _Lazy(t_ns, parts, fallback, [where[k] for k in order])
-        return Gated(a[:, 0].astype(np.intp), a[:, 1].astype(np.intp), a[:, 2], a[:, 3], a[:, 4], lazy, skips)
+            kept.add_part(ci[sel], js, part.nis, ll, dim, self.g[dim], part)
+        return kept.done()
+
+
+class BatchedGate(_Batched):
+    """Every candidate pair at once: the EKF equations of fusion.core.kalman on stacks."""
+
+    filter: ExtendedKalmanFilter
+
+    def _predict(self, ts: TrackSet, t_ns: int, tracks: np.ndarray) -> tuple[Array, Array]:
+        m = self.filter.motion
+        X, P = ts.X[tracks], ts.P[tracks]
+        dt = (t_ns - ts.t_ns[tracks]) * 1e-9
+        Xp, Pp = predict_stack(X, P, m.jacobian(X, dt), m.Q(X, dt))
+        return (Xp if m.is_linear else m.f(X, dt)), Pp
+
+    def _update(self, pred: object, rows: np.ndarray, Z: Array, R: Array, model: MeasurementModel
+                ) -> tuple[Array, Part]:
+        Xp, Pp = pred[0][rows], pred[1][rows]  # type: ignore[index]
+        Y = model.residual(Z, model.h(Xp))
+        H = np.broadcast_to(model.jacobian(Xp), (rows.size, Z.shape[1], Xp.shape[1]))
+        ok, Xn, Pn, S, nis, ll = update_stack(Xp, Pp, Y, H, R)
+        if not ok.all():
+            raise NumericalError("an innovation covariance S is not positive definite")
+        return ll, Part(Xn, Pn, Xp, Pp, Y, S, H, nis)
+
+
+class BatchedIMMGate(_Batched):
+    """Every candidate pair at once for an IMM of EKFs (fusion.core.imm_stack)."""
+
+    filter: IMM
+
+    def _predict(self, ts: TrackSet, t_ns: int, tracks: np.ndarray) -> StackPrediction:
+        return predict_imm(self.filter, ts.MX[tracks], ts.MP[tracks], ts.MU[tracks],  # type: ignore[index]
+                           (t_ns - ts.t_ns[tracks]) * 1e-9)
+
+    def _update(self, pred: object, rows: np.ndarray, Z: Array, R: Array, model: MeasurementModel
+                ) -> tuple[Array, Part]:
+        p: StackPrediction = pred  # type: ignore[assignment]
+        sub = StackPrediction(p.xs[rows], p.Ps[rows], p.c[rows], p.x[rows], p.P[rows])
+        u = update_imm(sub, Z, R, model)
+        return u.loglik, Part(u.x, u.P, sub.x, sub.P, u.y, u.S, u.H, u.nis, u.xs, u.Ps, u.mu)

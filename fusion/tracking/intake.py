@@ -20,6 +20,7 @@ batched:
 from __future__ import annotations
 
 import bisect
+import math
 from collections import deque
 from collections.abc import Mapping
 
@@ -139,11 +140,28 @@ class Intake:
                 return d, _no(d, Reason.INVALID, f"no noise: the message carries none and sensor {d.sensor_id} "
                               "has no default in the configuration")
             return Detection(d.sensor_id, d.t_ns, d.seq, z, R, d.arrival_ns), None
+        if _positive_diagonal(d.R, m):
+            return d, None
         try:
             R = as_covariance("R", d.R, m)
         except InputError as e:
             return d, _no(d, Reason.BAD_COVARIANCE, str(e))
         return Detection(d.sensor_id, d.t_ns, d.seq, z, R, d.arrival_ns), None
+
+
+def _positive_diagonal(R: np.ndarray, m: int) -> bool:
+    """R is an m x m diagonal matrix with finite positive entries: then it is a covariance as it
+    is (the common case: the wire's per-axis standard deviations), with no factorisation."""
+    if R.shape != (m, m):
+        return False
+    v = R.ravel().tolist()
+    for i, x in enumerate(v):
+        if i % (m + 1):
+            if x != 0.0:
+                return False
+        elif not (0.0 < x < math.inf):
+            return False
+    return True
 
 
 def _no(d: Detection, reason: Reason, detail: str) -> Refusal:

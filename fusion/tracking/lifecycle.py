@@ -40,9 +40,9 @@ class Lifecycle:
         self.q2 = q2
         self.coast_ns = round(cfg.coast_s * NS_PER_S)
 
-    def confirms(self, status: Status, hits: int, chances: int) -> bool:
-        """Does a hit that brings a track to `hits` in `chances` chances confirm it?"""
-        return status == Status.TENTATIVE and hits >= self.cfg.confirm_m and chances <= self.cfg.confirm_n
+    def confirms(self, status: np.ndarray, hits: np.ndarray, chances: np.ndarray) -> np.ndarray:
+        """Which hits, bringing tracks to `hits` in `chances` chances, confirm them."""
+        return (status == Status.TENTATIVE) & (hits >= self.cfg.confirm_m) & (chances <= self.cfg.confirm_n)
 
     def born_status(self) -> Status:
         return Status.CONFIRMED if self.cfg.confirm_m <= 1 else Status.TENTATIVE

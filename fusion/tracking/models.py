@@ -21,7 +21,6 @@ from fusion.core.measurement import CartesianPosition, MeasurementModel, Radar2D
 from fusion.core.modes import Mode, build_imm, mode_motion
 from fusion.core.motion import ConstantAcceleration, ConstantVelocity, CoordinatedTurn, MotionModel
 from fusion.core.ukf import UnscentedKalmanFilter
-from fusion.errors import ConfigError
 
 AXES = ("x", "y", "z")
 
@@ -98,31 +97,26 @@ class SensorModel:
             ok &= ((pos >= box[:, 0]) & (pos <= box[:, 1])).all(axis=1)
         return ok
 
-    def position_and_var(self, z: Array, R: Array) -> tuple[Array, Array]:
-        """The measured point in world coordinates and a per-axis variance bounding its spread."""
+    def positions(self, Z: Array, R: Array) -> tuple[Array, Array]:
+        """Measured points (k, d) in world coordinates of measurements Z (k, m) with noise R
+        (k, m, m) of one dimension, and a per-axis variance bounding each point's spread:
+        Rot R Rot' on the diagonal for a position sensor; for a radar the largest spread,
+        R_range + r^2 (R_bearing (+ R_elevation)), on every axis."""
+        model = self.by_dim[Z.shape[1]]
+        P = model.position(Z)
         if self.is_cartesian:
-            return z, np.diagonal(R).copy()
-        p = self.by_dim[z.shape[0]].position(z)
-        r = z[0]
-        var = R[0, 0] + r * r * R[1, 1]
+            Rot = getattr(model, "pose", None)
+            C = R if Rot is None else Rot.Rot @ R @ Rot.Rot.T
+            return P, np.diagonal(C, axis1=1, axis2=2).copy()
+        r2 = Z[:, 0] ** 2
+        var = R[:, 0, 0] + r2 * R[:, 1, 1]
         if self.ndim == 3:
-            var += r * r * R[2, 2]
-        return p, np.full(self.ndim, var)
+            var = var + r2 * R[:, 2, 2]
+        return P, np.repeat(var[:, None], self.ndim, axis=1)
 
     def position_cov(self, z: Array, R: Array) -> Array:
-        """Covariance of the measured point, J R J' with J = d position / d (range, angles)."""
-        if self.is_cartesian:
-            return R
-        r, a = z[0], z[1] + self.config.heading_rad
-        if self.ndim == 2:
-            J = np.array([[np.cos(a), -r * np.sin(a)], [np.sin(a), r * np.cos(a)]])
-            return J @ R[:2, :2] @ J.T
-        e = z[2]
-        ca, sa, ce, se = np.cos(a), np.sin(a), np.cos(e), np.sin(e)
-        J = np.array(
-            [[ce * ca, -r * ce * sa, -r * se * ca], [ce * sa, r * ce * ca, -r * se * sa], [se, 0.0, r * ce]]
-        )
-        return J @ R[:3, :3] @ J.T
+        """Covariance of one measured point in the world frame (for initiation)."""
+        return self.by_dim[z.shape[0]].position_cov(z, R)
 
 
 def _radar_R(s: RadarSensorConfig, ndim: int, range_rate: bool) -> Array | None:
@@ -142,12 +136,11 @@ def sensor_models(cfg: TrackerConfig, motion: MotionModel) -> dict[str, SensorMo
     for index, s in enumerate(sorted(cfg.sensors, key=lambda s: s.id)):
         by_dim: dict[int, MeasurementModel] = {}
         default: dict[int, Array | None] = {}
+        pose = {"heading_rad": s.heading_rad} | ({"pitch_rad": s.pitch_rad, "roll_rad": s.roll_rad} if d == 3 else {})
         if isinstance(s, CartesianSensorConfig):
-            if s.position_m or s.heading_rad:
-                raise ConfigError(f"sensor {s.id}: a pose for a Cartesian sensor is not supported yet; "
-                                  "give its measurements in the world frame and remove position_m/heading_rad")
             R = None if s.std_m is None else np.diag(np.square(np.asarray(s.std_m, dtype=np.float64)))
-            by_dim[d] = CartesianPosition(ndim_state=n, indices=pos_idx, R=np.eye(d) if R is None else R)
+            by_dim[d] = CartesianPosition(ndim_state=n, indices=pos_idx, R=np.eye(d) if R is None else R,
+                                          position=s.position_m or None, **pose)
             default[d] = R
         else:
             where = np.asarray(s.position_m or [0.0] * d, dtype=np.float64)
@@ -155,9 +148,8 @@ def sensor_models(cfg: TrackerConfig, motion: MotionModel) -> dict[str, SensorMo
             for rr in (False, True):
                 R = _radar_R(s, d, rr)
                 m = d + rr
-                by_dim[m] = cls(R=np.eye(m) if R is None else R, position=where, heading_rad=s.heading_rad,
-                                pos_idx=pos_idx[:d], vel_idx=vel_idx[:d], range_rate=rr,  # type: ignore[arg-type]
-                                ndim_state=n)
+                by_dim[m] = cls(R=np.eye(m) if R is None else R, position=where, pos_idx=pos_idx[:d],  # type: ignore[arg-type]
+                                vel_idx=vel_idx[:d], range_rate=rr, ndim_state=n, **pose)  # type: ignore[arg-type]
                 default[m] = R
         out[s.id] = SensorModel(s, index, by_dim, default, d)
     return out

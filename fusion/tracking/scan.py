@@ -21,8 +21,7 @@ import numpy as np
 
 from fusion.core.association import coarse_pairs, gnn_assign
 from fusion.core.checks import Array
-from fusion.core.gaussian import GaussianState
-from fusion.core.imm import IMM, Filter, IMMState
+from fusion.core.imm import IMM, Filter
 from fusion.tracking.detection import Detection
 from fusion.tracking.gating import Gated, Gater, Measured
 from fusion.tracking.lifecycle import Lifecycle
@@ -36,7 +35,7 @@ from fusion.tracking.results import (
     ScanKey,
     TrackEvent,
 )
-from fusion.tracking.trackset import Status, Track, TrackSet, track_id_for
+from fusion.tracking.trackset import Rows, Status, TrackSet, track_id_for
 
 
 class Tally(StrEnum):
@@ -72,6 +71,7 @@ class ScanOutcome:
     events: list[TrackEvent]
     associations: list[Association]
     tally: Counter[Tally | DeletionReason]
+    positions: Array  # (M, d) world points of the scan's measurements, in the order of its detections
 
 
 def run_scan(ts: TrackSet, key: ScanKey, dets: tuple[Detection, ...], ctx: ScanContext) -> ScanOutcome:
@@ -88,66 +88,80 @@ def run_scan(ts: TrackSet, key: ScanKey, dets: tuple[Detection, ...], ctx: ScanC
 
     tally: Counter[Tally | DeletionReason] = Counter()
     tally[Tally.NUMERICAL_SKIPS] += gated.numerical_skips
-    estimates: list[Estimate] = []
-    events: list[TrackEvent] = []
-    assoc: list[Association] = []
-    replace: dict[int, Track] = {}
-    taken: dict[int, int] = {}  # measurement -> pair
-    for p in pairs:
-        i, j = int(gated.ti[p]), int(gated.mj[p])
-        tr, up, d = ts.tracks[i], gated.update(p), dets[j]
-        hits = tr.hits + 1
-        status = tr.status
-        if ctx.lifecycle.confirms(status, hits, int(ts.chances[i]) + 1):
-            status = Status.CONFIRMED
-            events.append(TrackEvent(EventKind.CONFIRMED, tr.id, t_ns))
-            tally[Tally.CONFIRMATIONS] += 1
-        replace[i] = Track(tr.id, up.state, status, hits, tr.birth_t_ns, tr.origin, (d.sensor_id, d.seq))
-        taken[j] = p
-        estimates.append(Estimate(
-            tr.id, t_ns, sensor_id, d.seq, up.state.x, up.state.P, status.label, 0, up.nis, up.y, up.S,
-            _mu(up.state), mpos[j].copy(), up.prior_x, up.prior_P, up.H))
     tally[Tally.UPDATES] += len(pairs)
+    ti, mj = gated.ti[pairs], gated.mj[pairs]
+    taken = gated.take(pairs)
+    hits = ts.hits[ti] + 1
+    confirm = ctx.lifecycle.confirms(ts.status[ti], hits, ts.chances[ti] + 1)
+    status = np.where(confirm, np.int8(Status.CONFIRMED), ts.status[ti]).astype(np.int8)
+    seqs = np.array([dets[j].seq for j in mj.tolist()], dtype=np.int64)
+    updated_rows = Rows(ts.ids[ti], status, hits, ts.birth_t_ns[ti], np.full(ti.size, t_ns, np.int64),
+                        ts.chances[ti], ts.misses[ti], ts.seen_by[ti], ts.origin_sensor[ti], ts.origin_seq[ti],
+                        np.full(ti.size, sm.index, np.int32), seqs, taken.X, taken.P, taken.MX, taken.MP, taken.MU)
+    events = [TrackEvent(EventKind.CONFIRMED, int(ts.ids[i]), t_ns) for i in ti[confirm].tolist()]
+    tally[Tally.CONFIRMATIONS] += len(events)
+    labels = [Status(int(v)).label for v in status.tolist()]
+    estimates = [
+        Estimate(int(ts.ids[i]), t_ns, sensor_id, int(seqs[k]), taken.X[k], taken.P[k], labels[k], 0,
+                 float(gated.nis[p]), taken.y[k], taken.S[k], None if taken.MU is None else taken.MU[k],
+                 mpos[j], taken.prior_x[k], taken.prior_P[k], taken.H[k])
+        for k, (p, i, j) in enumerate(zip(pairs, ti.tolist(), mj.tolist(), strict=True))
+    ]
 
+    assoc, born, born_j = _births_and_associations(ts, key, dets, gated, dict(zip(mj.tolist(), pairs, strict=True)),
+                                                   ctx, sm, mpos, tally)
+    for b in range(born.ids.size):
+        tid = int(born.ids[b])
+        events.append(TrackEvent(EventKind.BORN, tid, t_ns))
+        if born.status[b] == Status.CONFIRMED:  # confirm_m == 1: the first hit confirms
+            events.append(TrackEvent(EventKind.CONFIRMED, tid, t_ns))
+            tally[Tally.CONFIRMATIONS] += 1
+        estimates.append(Estimate(tid, t_ns, sensor_id, int(born.last_seq[b]), born.X[b], born.P[b],
+                                  Status(int(born.status[b])).label, 0, None, None, None,
+                                  None if born.MU is None else born.MU[b], mpos[born_j[b]]))
+    tally[Tally.BIRTHS] += born.ids.size
+
+    updated = ts.derive(update=(ti, updated_rows))
+    hit = np.zeros(len(ts), dtype=bool)
+    hit[ti] = True
+    sweep = ctx.lifecycle.sweep(ts, updated, hit, sm, t_ns)
+    for ev in sweep.events:
+        tally[ev.reason] += 1  # type: ignore[index]
+    events.extend(sweep.events)
+    after = updated.derive(counters=sweep.counters, delete=sweep.delete, born=born)
+    estimates.sort(key=lambda e: e.track_id)
+    return ScanOutcome(after, estimates, events, assoc, tally, mpos)
+
+
+def _births_and_associations(ts: TrackSet, key: ScanKey, dets: tuple[Detection, ...], gated: Gated,
+                             taken: dict[int, int], ctx: ScanContext, sm: SensorModel, mpos: Array,
+                             tally: Counter) -> tuple[list[Association], Rows, list[int]]:
+    """What became of each measurement; a measurement in no gate starts a track (up to
+    max_tracks), born with single-point initiation."""
+    t_ns, sensor_id = key
     gated_by: dict[int, list[int]] = {}
     for i, j in zip(gated.ti.tolist(), gated.mj.tolist(), strict=True):
         gated_by.setdefault(j, []).append(int(ts.ids[i]))
-    born: list[Track] = []
+    assoc: list[Association] = []
+    births: list[int] = []
     room = ctx.max_tracks - len(ts)
     for j, d in enumerate(dets):
         near = tuple(gated_by.get(j, ()))
-        if j in taken:
-            p = taken[j]
+        p = taken.get(j)
+        if p is not None:
             assoc.append(Association(sensor_id, t_ns, d.seq, Outcome.UPDATED, int(ts.ids[gated.ti[p]]),
                                      float(gated.nis[p]), near))
         elif near:
             assoc.append(Association(sensor_id, t_ns, d.seq, Outcome.UNASSIGNED, None, None, near))
             tally[Tally.UNASSIGNED] += 1
-        elif len(born) >= room:
+        elif len(births) >= room:
             assoc.append(Association(sensor_id, t_ns, d.seq, Outcome.CAPACITY, None, None, ()))
             tally[Tally.BIRTHS_REFUSED_CAPACITY] += 1
         else:
-            nt = _birth(d, sm, ctx)
-            born.append(nt)
-            events.append(TrackEvent(EventKind.BORN, nt.id, t_ns))
-            tally[Tally.BIRTHS] += 1
-            if nt.status == Status.CONFIRMED:  # confirm_m == 1: the first hit confirms
-                events.append(TrackEvent(EventKind.CONFIRMED, nt.id, t_ns))
-                tally[Tally.CONFIRMATIONS] += 1
-            assoc.append(Association(sensor_id, t_ns, d.seq, Outcome.BORN, nt.id, None, ()))
-            estimates.append(Estimate(nt.id, t_ns, sensor_id, d.seq, nt.state.x, nt.state.P, nt.status.label, 0,
-                                      None, None, None, _mu(nt.state), mpos[j].copy()))
-
-    updated = ts.derive(replace=replace)
-    hit = np.zeros(len(ts), dtype=bool)
-    hit[list(replace)] = True
-    sweep = ctx.lifecycle.sweep(ts, updated, hit, sm, t_ns)
-    for ev in sweep.events:
-        tally[ev.reason] += 1  # type: ignore[index]
-    events.extend(sweep.events)
-    after = updated.derive(counters=sweep.counters, delete=sweep.delete, born=tuple(born), born_sensor=sm.index)
-    estimates.sort(key=lambda e: e.track_id)
-    return ScanOutcome(after, estimates, events, assoc, tally)
+            births.append(j)
+            assoc.append(Association(sensor_id, t_ns, d.seq, Outcome.BORN,
+                                     track_id_for(sensor_id, d.seq, t_ns), None, ()))
+    return assoc, _born_rows(ts, [dets[j] for j in births], mpos[births], sm, ctx), births
 
 
 def _assign_confirmed_first(g: Gated, ts: TrackSet, n_meas: int) -> list[int]:
@@ -171,29 +185,47 @@ def _assign_confirmed_first(g: Gated, ts: TrackSet, n_meas: int) -> list[int]:
 
 
 def _measured_points(sm: SensorModel, dets: tuple[Detection, ...]) -> tuple[Array, Array]:
+    """World points of the scan's measurements and per-axis variances, one call per dimension."""
     mpos = np.empty((len(dets), sm.ndim))
     mvar = np.empty((len(dets), sm.ndim))
-    for j, d in enumerate(dets):
-        mpos[j], mvar[j] = sm.position_and_var(d.z, d.R)  # type: ignore[arg-type]
+    dims = [d.z.shape[0] for d in dets]
+    for m in sorted(set(dims)):
+        rows = [j for j, k in enumerate(dims) if k == m]
+        Z = np.stack([dets[j].z for j in rows])
+        R = np.stack([dets[j].R for j in rows])  # type: ignore[misc]
+        mpos[rows], mvar[rows] = sm.positions(Z, R)
     return mpos, mvar
 
 
-def _birth(d: Detection, sm: SensorModel, ctx: ScanContext) -> Track:
+def _born_rows(ts: TrackSet, born: list[Detection], pos: Array, sm: SensorModel, ctx: ScanContext) -> Rows:
     """Single-point initiation: position and its covariance from the measurement, the rest from
-    the configured prior (zero mean)."""
+    the configured prior (zero mean); an IMM starts with equal mode probabilities."""
+    k = len(born)
+    L = ts.layout
+    if not k:
+        return Rows.empty(L)
     pi = list(ctx.pos_idx)
-    x = np.zeros(ctx.init_diag.shape[0])
-    x[pi] = sm.by_dim[d.z.shape[0]].position(d.z)
-    P = np.diag(ctx.init_diag)
-    P[np.ix_(pi, pi)] = sm.position_cov(d.z, d.R)  # type: ignore[arg-type]
-    P = 0.5 * (P + P.T)
-    # x and P are built from validated input: a plain state needs no further checks
-    state: GaussianState | IMMState = (ctx.filter.initial(x, P, t_ns=d.t_ns) if isinstance(ctx.filter, IMM)
-                                       else GaussianState(x, P, d.t_ns))
-    tid = track_id_for(d.sensor_id, d.seq, d.t_ns)
-    origin = (d.sensor_id, d.seq)
-    return Track(tid, state, ctx.lifecycle.born_status(), 1, d.t_ns, origin, origin)
+    X = np.zeros((k, L.n_state))
+    X[:, pi] = pos
+    P = np.repeat(np.diag(ctx.init_diag)[None], k, axis=0)
+    for b, d in enumerate(born):
+        P[b][np.ix_(pi, pi)] = sm.position_cov(d.z, d.R)  # type: ignore[arg-type]
+    P = 0.5 * (P + np.swapaxes(P, -1, -2))
+    MX = MP = MU = None
+    if isinstance(ctx.filter, IMM):  # x and P are built from validated input
+        states = [ctx.filter.initial(X[b], P[b], t_ns=d.t_ns) for b, d in enumerate(born)]
+        X, P = np.stack([s.x for s in states]), np.stack([s.P for s in states])
+        MX, MP, MU = (np.stack([s.xs for s in states]), np.stack([s.Ps for s in states]),
+                      np.stack([s.mu for s in states]))
+    t = np.array([d.t_ns for d in born], dtype=np.int64)
+    seq = np.array([d.seq for d in born], dtype=np.int64)
+    sensor = np.full(k, sm.index, np.int32)
+    seen = np.zeros((k, len(L.sensors)), dtype=bool)
+    seen[:, sm.index] = True
+    ids = np.array([track_id_for(d.sensor_id, d.seq, d.t_ns) for d in born], dtype=np.int64)
+    status = np.full(k, ctx.lifecycle.born_status(), np.int8)
+    one = np.ones(k, dtype=np.int64)
+    return Rows(ids, status, one, t, t, one.copy(), np.zeros(k, np.int64), seen, sensor, seq, sensor.copy(),
+                seq.copy(), X, P, MX, MP, MU)
 
 
-def _mu(state: GaussianState | IMMState) -> Array | None:
-    return state.mu if isinstance(state, IMMState) else None

@@ -40,7 +40,7 @@ from fusion.tracking.results import (
     TrackEvent,
 )
 from fusion.tracking.scan import ScanContext, Tally, run_scan
-from fusion.tracking.trackset import Rows, Status, Track, TrackSet
+from fusion.tracking.trackset import Layout, Status, Track, TrackSet
 
 
 class Tracker:
@@ -68,7 +68,8 @@ class Tracker:
         )
         self.intake = Intake(self.sensors, config.time)
         self.history = History()
-        self._ts = TrackSet((), None, Rows(self.position_indices, self.velocity_indices, len(self.sensors)))
+        self._ts = TrackSet.start(Layout(self.position_indices, self.velocity_indices, tuple(sorted(self.sensors)),
+                                         self.motion.ndim_state, len(getattr(self.filter, "filters", ()))))
         self._intake_counts = {"received": 0, "applied": 0}
         self._refused: dict[Reason, int] = {}
         self._arrival = {"replays": 0, "replayed_scans": 0, "rescans": 0, "late_applied": 0}
@@ -84,7 +85,8 @@ class Tracker:
         return self._ts
 
     def confirmed(self) -> tuple[Track, ...]:
-        return tuple(t for t in self._ts.tracks if t.status == Status.CONFIRMED)
+        ts = self._ts
+        return tuple(ts.track(i) for i in range(len(ts)) if ts.status[i] == Status.CONFIRMED)
 
     @property
     def now_ns(self) -> int | None:
@@ -123,11 +125,15 @@ class Tracker:
         estimates: list[Estimate] = []
         events: list[TrackEvent] = []
         assoc = []
+        points: list[MeasuredPoint] = []
         ts = rw.start
         for key in rw.keys:
             prev = rw.old.get(key)
             dets = tuple(sorted((prev.dets if prev else ()) + tuple(scans.get(key, ())), key=lambda d: d.seq))
             out = run_scan(ts, key, dets, self.ctx)
+            new = {d.seq for d in scans.get(key, ())}
+            points.extend(MeasuredPoint(d.sensor_id, d.t_ns, d.seq, out.positions[j])
+                          for j, d in enumerate(dets) if d.seq in new)
             entry = Entry(key, dets, ts, tally=out.tally)
             estimates.extend(revise(entry, prev, out.estimates))
             events.extend(revise_events(entry, prev, out.events))
@@ -136,10 +142,8 @@ class Tracker:
             ts = out.after
         self._ts = ts
         self._commit()
-        points = tuple(MeasuredPoint(d.sensor_id, d.t_ns, d.seq, self.sensors[d.sensor_id].by_dim[d.z.shape[0]]
-                                     .position(d.z)) for d in accepted)
         return StepResult(tuple(estimates), tuple(events), tuple(refused), len(accepted), replays, tuple(assoc),
-                          points)
+                          tuple(points))
 
     def _admit(self, detections: Iterable[Detection]) -> tuple[list[Detection], list[Refusal]]:
         accepted: list[Detection] = []

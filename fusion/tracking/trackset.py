@@ -1,19 +1,21 @@
-"""Tracks and the immutable set of them that the tracker checkpoints.
+"""The immutable set of tracks that the tracker checkpoints, as arrays (one row per track).
 
 A TrackSet is never modified: each scan builds a new one, so a checkpoint is a reference and
-rewinding for a late measurement costs nothing. Beside the Track records it holds arrays, one
-row per track, so that gating and the lifecycle are vectorised over tracks:
-  pos, vel (N, d) and the per-axis variances vpp, vpv, vvv at each track's own time t_ns;
-  status, hits; chances (scans of sensors that could have seen it, since its birth), misses
-  (such chances in a row without a hit) and seen_by (N, S): which sensors have updated it.
-The lifecycle counters live only in the arrays: a scan that changes them for every covered
-track builds no Track objects.
+rewinding for a late measurement costs nothing. Everything is a column, so gating, updates and
+the lifecycle are vectorised over tracks and a scan builds no per-track objects:
+  ids, status, hits, birth_t_ns, t_ns (of the last update), chances (scans of sensors that
+  could have seen the track, since its birth), misses (such chances in a row without a hit),
+  seen_by (N, S): which sensors have updated it, origin and last (sensor index, seq) of the
+  measurements that started and last updated it;
+  X (N, n), P (N, n, n): the posterior at t_ns; for an IMM also the modes' MX (N, M, n),
+  MP (N, M, n, n) and probabilities MU (N, M) (X, P being their combination).
+`Track` is a read-only view of one row, built on demand.
 """
 
 from __future__ import annotations
 
 import hashlib
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from enum import IntEnum
 
 import numpy as np
@@ -46,7 +48,8 @@ def track_id_for(sensor_id: str, seq: int, t_ns: int) -> int:
 
 @dataclass(frozen=True, slots=True)
 class Track:
-    """One track: its posterior at its last update (state.t_ns), its status and hit count."""
+    """One track, as a view of its TrackSet row: its posterior at its last update (state.t_ns),
+    its status and hit count, and the measurements that started and last updated it."""
 
     id: int
     state: GaussianState | IMMState
@@ -58,106 +61,141 @@ class Track:
 
 
 @dataclass(frozen=True, slots=True)
-class Rows:
-    """Where the arrays' columns come from: the state's position and velocity components, and
-    the number of sensors (columns of seen_by)."""
+class Layout:
+    """What the columns mean: the state's position and velocity components, the sensors (by
+    index, sorted by id), and the number of IMM modes (0 without an IMM)."""
 
     pos_idx: tuple[int, ...]
     vel_idx: tuple[int, ...]
-    n_sensors: int
+    sensors: tuple[str, ...]
+    n_state: int
+    n_modes: int = 0
 
 
-ARRAY_FIELDS = ("ids", "pos", "vel", "vpp", "vpv", "vvv", "t_ns", "status", "hits", "chances", "misses", "seen_by")
+@dataclass(frozen=True)
+class Rows:
+    """Columns of k tracks (k rows of every field of a TrackSet)."""
+
+    ids: np.ndarray
+    status: np.ndarray
+    hits: np.ndarray
+    birth_t_ns: np.ndarray
+    t_ns: np.ndarray
+    chances: np.ndarray
+    misses: np.ndarray
+    seen_by: np.ndarray
+    origin_sensor: np.ndarray
+    origin_seq: np.ndarray
+    last_sensor: np.ndarray
+    last_seq: np.ndarray
+    X: np.ndarray
+    P: np.ndarray
+    MX: np.ndarray | None = None
+    MP: np.ndarray | None = None
+    MU: np.ndarray | None = None
+
+    @classmethod
+    def empty(cls, layout: Layout) -> Rows:
+        i = np.zeros(0, dtype=np.int64)
+        n, M = layout.n_state, layout.n_modes
+        return cls(i, np.zeros(0, np.int8), i, i, i, i, i, np.zeros((0, len(layout.sensors)), bool),
+                   np.zeros(0, np.int32), i, np.zeros(0, np.int32), i, np.zeros((0, n)), np.zeros((0, n, n)),
+                   *((np.zeros((0, M, n)), np.zeros((0, M, n, n)), np.zeros((0, M))) if M else (None, None, None)))
+
+
+ROW_FIELDS = tuple(f.name for f in fields(Rows))
 COUNTERS = ("chances", "misses", "seen_by")
 
 
 class TrackSet:
-    """An immutable, ordered set of tracks with vectorised views for gating and the lifecycle."""
+    """An immutable set of tracks (see the module docstring): the columns of Rows, and layout."""
 
-    __slots__ = ("_index", "chances", "hits", "ids", "misses", "pos", "rows", "seen_by", "status", "t_ns",
-                 "tracks", "vel", "vpp", "vpv", "vvv")
+    __slots__ = (*ROW_FIELDS, "_index", "_views", "layout")
+    ids: np.ndarray
+    status: np.ndarray
+    hits: np.ndarray
+    birth_t_ns: np.ndarray
+    t_ns: np.ndarray
+    chances: np.ndarray
+    misses: np.ndarray
+    seen_by: np.ndarray
+    origin_sensor: np.ndarray
+    origin_seq: np.ndarray
+    last_sensor: np.ndarray
+    last_seq: np.ndarray
+    X: np.ndarray
+    P: np.ndarray
+    MX: np.ndarray | None
+    MP: np.ndarray | None
+    MU: np.ndarray | None
 
-    def __init__(self, tracks: tuple[Track, ...], arrays: dict[str, np.ndarray] | None, rows: Rows) -> None:
-        self.tracks = tracks
-        self.rows = rows
-        if arrays is None:
-            arrays = _rows(tracks, rows)
-        self.ids = arrays["ids"]
-        self.pos, self.vel = arrays["pos"], arrays["vel"]
-        self.vpp, self.vpv, self.vvv = arrays["vpp"], arrays["vpv"], arrays["vvv"]
-        self.t_ns, self.status, self.hits = arrays["t_ns"], arrays["status"], arrays["hits"]
-        self.chances, self.misses, self.seen_by = arrays["chances"], arrays["misses"], arrays["seen_by"]
+    def __init__(self, rows: Rows, layout: Layout) -> None:
+        for f in ROW_FIELDS:
+            setattr(self, f, getattr(rows, f))
+        self.layout = layout
         self._index: dict[int, int] | None = None
+        self._views: tuple[Track, ...] | None = None
+
+    @classmethod
+    def start(cls, layout: Layout) -> TrackSet:
+        return cls(Rows.empty(layout), layout)
 
     def __len__(self) -> int:
-        return len(self.tracks)
-
-    def arrays(self) -> dict[str, np.ndarray]:
-        return {k: getattr(self, k) for k in ARRAY_FIELDS}
+        return int(self.ids.shape[0])
 
     def index_of(self, track_id: int) -> int | None:
         if self._index is None:
-            self._index = {int(t): i for i, t in enumerate(self.ids)}
+            self._index = {int(t): i for i, t in enumerate(self.ids.tolist())}
         return self._index.get(track_id)
 
-    def predicted_position(self, t_ns: int, q2: float) -> tuple[Array, Array]:
-        """Constant-velocity extrapolation of every track's position to t_ns, with the
-        per-axis variance vpp + 2 dt vpv + dt^2 vvv + q2 dt^3 / 3."""
-        dt = ((t_ns - self.t_ns) * 1e-9)[:, None]
-        var = self.vpp + 2.0 * dt * self.vpv + dt * dt * self.vvv + q2 * dt**3 / 3.0
-        return self.pos + self.vel * dt, np.maximum(var, 0.0)
+    def state(self, i: int) -> GaussianState | IMMState:
+        t = int(self.t_ns[i])
+        if self.MX is None:
+            return GaussianState(self.X[i], self.P[i], t)
+        return IMMState(self.MX[i], self.MP[i], self.MU[i], self.X[i], self.P[i], t)  # type: ignore[index]
 
-    def derive(self, *, replace: dict[int, Track] | None = None, counters: dict[str, np.ndarray] | None = None,
-               delete: np.ndarray | None = None, born: tuple[Track, ...] = (), born_sensor: int = 0) -> TrackSet:
-        """A new set: rows `replace` (by index) swapped, the lifecycle `counters` replaced,
-        rows where `delete` is true removed, then `born` appended (first seen by sensor
-        `born_sensor`). Only the changed rows are recomputed."""
-        tracks = list(self.tracks)
-        arr = self.arrays()
-        if replace:
-            arr = {k: (v if k in COUNTERS else v.copy()) for k, v in arr.items()}
-            idx = np.fromiter(replace.keys(), dtype=np.intp, count=len(replace))
-            new = tuple(replace.values())
-            for i, t in zip(idx.tolist(), new, strict=True):
-                tracks[i] = t
-            r = _rows(new, self.rows)
-            for k in ARRAY_FIELDS:
-                if k not in COUNTERS:
-                    arr[k][idx] = r[k]
+    def track(self, i: int) -> Track:
+        s = self.layout.sensors
+        return Track(int(self.ids[i]), self.state(i), Status(int(self.status[i])), int(self.hits[i]),
+                     int(self.birth_t_ns[i]), (s[int(self.origin_sensor[i])], int(self.origin_seq[i])),
+                     (s[int(self.last_sensor[i])], int(self.last_seq[i])))
+
+    @property
+    def tracks(self) -> tuple[Track, ...]:
+        """Views of every row, in order (built once per set, on first use)."""
+        if self._views is None:
+            self._views = tuple(self.track(i) for i in range(len(self)))
+        return self._views
+
+    def predicted_position(self, t_ns: int, q2: float) -> tuple[Array, Array]:
+        """Constant-velocity extrapolation of every track's position to t_ns, with the per-axis
+        variance P_pp + 2 dt P_pv + dt^2 P_vv + q2 dt^3 / 3 (no velocity: P_pp + q2 dt)."""
+        pi, vi = list(self.layout.pos_idx), list(self.layout.vel_idx)
+        dt = ((t_ns - self.t_ns) * 1e-9)[:, None]
+        pos, vpp = self.X[:, pi], self.P[:, pi, pi]
+        if not vi:
+            return pos, vpp + q2 * np.abs(dt)
+        var = vpp + 2.0 * dt * self.P[:, pi, vi] + dt * dt * self.P[:, vi, vi] + q2 * dt**3 / 3.0
+        return pos + self.X[:, vi] * dt, np.maximum(var, 0.0)
+
+    def derive(self, *, update: tuple[np.ndarray, Rows] | None = None,
+               counters: dict[str, np.ndarray] | None = None, delete: np.ndarray | None = None,
+               born: Rows | None = None) -> TrackSet:
+        """A new set: rows `update[0]` replaced by `update[1]` (all but the counters), the
+        lifecycle `counters` replaced, rows where `delete` is true removed, `born` appended."""
+        cols = {f: getattr(self, f) for f in ROW_FIELDS}
+        if update is not None and update[0].size:
+            idx, new = update
+            for f in ROW_FIELDS:
+                if f not in COUNTERS and cols[f] is not None:
+                    c = cols[f].copy()
+                    c[idx] = getattr(new, f)
+                    cols[f] = c
         if counters:
-            arr = {**arr, **counters}
+            cols.update(counters)
         if delete is not None and delete.any():
             keep = ~delete
-            tracks = [t for t, k in zip(tracks, keep.tolist(), strict=True) if k]
-            arr = {k: v[keep] for k, v in arr.items()}
-        if born:
-            tracks.extend(born)
-            r = _rows(born, self.rows)
-            r["seen_by"][:, born_sensor] = True
-            arr = {k: np.concatenate([arr[k], r[k]]) for k in ARRAY_FIELDS}
-        return TrackSet(tuple(tracks), arr, self.rows)
-
-
-def _rows(tracks: tuple[Track, ...], rows: Rows) -> dict[str, np.ndarray]:
-    """Array rows of new tracks; the lifecycle counters start at a birth's values (one chance,
-    one hit, no misses, seen by nobody yet: `derive` marks the birth sensor)."""
-    n = len(tracks)
-    d = len(rows.pos_idx)
-    zi = np.zeros(n, dtype=np.int64)
-    out = {"ids": zi, "pos": np.zeros((n, d)), "vel": np.zeros((n, d)), "vpp": np.zeros((n, d)),
-           "vpv": np.zeros((n, d)), "vvv": np.zeros((n, d)), "t_ns": zi, "status": zi.astype(np.int8),
-           "hits": zi, "chances": np.ones(n, dtype=np.int64), "misses": zi.copy(),
-           "seen_by": np.zeros((n, rows.n_sensors), dtype=bool)}
-    if n == 0:
-        return out
-    X = np.stack([t.state.x for t in tracks])
-    P = np.stack([t.state.P for t in tracks])
-    pi, vi = np.array(rows.pos_idx), np.array(rows.vel_idx)
-    out.update(
-        ids=np.fromiter((t.id for t in tracks), dtype=np.int64, count=n),
-        pos=X[:, pi], vel=X[:, vi], vpp=P[:, pi, pi], vpv=P[:, pi, vi], vvv=P[:, vi, vi],
-        t_ns=np.fromiter((t.state.t_ns for t in tracks), dtype=np.int64, count=n),
-        status=np.fromiter((t.status for t in tracks), dtype=np.int8, count=n),
-        hits=np.fromiter((t.hits for t in tracks), dtype=np.int64, count=n),
-    )
-    return out
+            cols = {f: None if c is None else c[keep] for f, c in cols.items()}
+        if born is not None and born.ids.size:
+            cols = {f: None if c is None else np.concatenate([c, getattr(born, f)]) for f, c in cols.items()}
+        return TrackSet(Rows(**cols), self.layout)

@@ -1,4 +1,5 @@
-"""The batched and per-pair gates agree to 1e-12 on every model both serve, inside the tracker."""
+"""The batched and per-pair gates agree to 1e-12 on every model both serve (CV, CA, CT, IMMs of
+them), inside the tracker."""
 
 from __future__ import annotations
 
@@ -7,8 +8,8 @@ import dataclasses
 import numpy as np
 import pytest
 
-from fusion.config import MotionConfig, TrackerConfig
-from fusion.tracking.gating import BatchedGate, PerPairGate
+from fusion.config import ModeConfig, MotionConfig, TrackerConfig
+from fusion.tracking.gating import BatchedGate, BatchedIMMGate, PerPairGate
 from fusion.tracking.tracker import Tracker
 from tests.tracking.streams import Sensor, constant_velocity, detect, in_order, scans
 
@@ -19,7 +20,15 @@ MODELS = {
     "cv": MotionConfig(model="cv", accel_psd_m2s3=0.5),
     "ca": MotionConfig(model="ca", accel_psd_m2s3=0.5),
     "ct": MotionConfig(model="ct", accel_psd_m2s3=0.5, turn_psd_rad2s3=0.01),
+    "imm-cv-ct": MotionConfig(model="imm", modes=[
+        ModeConfig(model="cv", accel_psd_m2s3=0.25, sojourn_s=20.0),
+        ModeConfig(model="ct", accel_psd_m2s3=0.25, turn_psd_rad2s3=0.01, sojourn_s=5.0)]),
+    "imm-cv-cv": MotionConfig(model="imm", modes=[
+        ModeConfig(model="cv", accel_psd_m2s3=0.1, sojourn_s=20.0),
+        ModeConfig(model="cv", accel_psd_m2s3=10.0, sojourn_s=2.0)]),
 }
+BATCHED = {"cv": BatchedGate, "ca": BatchedGate, "ct": BatchedGate, "imm-cv-ct": BatchedIMMGate,
+           "imm-cv-cv": BatchedIMMGate}
 
 
 def run(motion: MotionConfig, gate: type, seed: int) -> list:
@@ -41,8 +50,8 @@ def run(motion: MotionConfig, gate: type, seed: int) -> list:
 def test_batched_and_per_pair_gates_agree(name: str) -> None:
     motion = MODELS[name]
     tr = Tracker(TrackerConfig(sensors=[CART.config()], motion=motion))
-    assert isinstance(tr.ctx.gater, BatchedGate), "the shipped choice for this model is the batched gate"
-    a, b = run(motion, BatchedGate, 7), run(motion, PerPairGate, 7)
+    assert isinstance(tr.ctx.gater, BATCHED[name]), "the shipped choice for this model is a batched gate"
+    a, b = run(motion, BATCHED[name], 7), run(motion, PerPairGate, 7)
     assert len(a) == len(b) > 40
     n = 0
     for ra, rb in zip(a, b, strict=True):
