@@ -132,6 +132,8 @@ _KEY = re.compile(r"^\s*([A-Za-z0-9_\-\".]+)\s*=")
 
 def line_of(text: bytes | str, path: Path_) -> int | None:
     """1-based line of the first header or key that `path` names or lies under, or None."""
+    if not path:  # the document itself
+        return None
     if isinstance(text, bytes):
         text = text.decode("utf-8", "replace")
     want = [str(s) for s in path]

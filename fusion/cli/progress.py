@@ -39,6 +39,8 @@ class Bar:
             self._tq.total = total
             self._tq.refresh()
         self._tq.update(done - self._tq.n)
+        if self._tq.total is not None and done >= self._tq.total:
+            self._tq.refresh()  # the final count and rate, whatever the redraw interval
 
     def close(self) -> None:
         if self._tq is not None:

@@ -143,6 +143,8 @@ def run(prog: str, parser: argparse.ArgumentParser, argv: list[str] | None,
         except BrokenPipeError:
             _silence_stdout()
         where = err.where or where
+        if err.code == Exit.USAGE and "--help" not in str(err):
+            err = CliError(err.code, f"{err} (see {where} --help)")
         print(f"{where}: error: {err}" if err.code != Exit.INTERRUPTED else f"{where}: {err}", file=sys.stderr)
         return err.code
     finally:
