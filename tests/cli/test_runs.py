@@ -19,16 +19,16 @@ from tests.cli.helpers import SERVICE_TOML, run, run_on_terminal, start
 
 
 @pytest.fixture(scope="module")
-def demo_dir(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, str]:
-    """A short demo of the smallest scenario, run once: (its folder, what it printed)."""
+def demo_dir(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, str, str]:
+    """A short demo of the smallest scenario, run once: (its folder, its stdout, its stderr)."""
     d = tmp_path_factory.mktemp("demo")
     r = run("fusion", "demo", "-s", "cv1d_a", "--duration", "3", "--speed", "max", cwd=d)
     assert r.returncode == 0, r.stderr
-    return d, r.stdout
+    return d, r.stdout, r.stderr
 
 
-def test_demo_writes_per_scenario_files_and_a_consistent_summary(demo_dir: tuple[Path, str]) -> None:
-    d, out = demo_dir
+def test_demo_writes_per_scenario_files_and_a_consistent_summary(demo_dir: tuple[Path, str, str]) -> None:
+    d, out, _ = demo_dir
     assert (d / "recordings" / "cv1d_a.rrd").exists() and (d / "recordings" / "cv1d_a.fstream").exists()
     assert not (d / "recordings" / "demo.rrd").exists()
     sent = int(re.search(r"sent\s+(\d+) measurements", out).group(1))  # type: ignore[union-attr]
@@ -61,27 +61,28 @@ def test_demo_ctrl_c_prints_the_summary_so_far(tmp_path: Path) -> None:
         assert b"RRF2FOOT" in f.read()
 
 
-def test_replay_progress_on_a_terminal_only(demo_dir: tuple[Path, str], tmp_path: Path) -> None:
-    d, _ = demo_dir
-    stream = d / "recordings" / "cv1d_a.fstream"
-    code, out, term = run_on_terminal("fusion", "replay", str(stream), "-o", str(tmp_path / "t.rrd"), cwd=tmp_path)
+def test_replay_progress_on_a_terminal_only(demo_dir: tuple[Path, str, str]) -> None:
+    """A bar with rate and ETA on a terminal; the summary on stdout; the output beside the stream."""
+    d, _, _ = demo_dir
+    code, out, term = run_on_terminal("fusion", "replay", "recordings/cv1d_a.fstream", cwd=d)
     assert code == 0, term
     assert re.search(r"replay cv1d_a\.fstream: 100%\|.*\| 60/60 \[\d\d:\d\d<\d\d:\d\d, .*sample/s\]", term), term
-    assert "replayed 60 samples" in out and (tmp_path / "t.rrd").exists()
-    piped = run("fusion", "replay", "recordings/cv1d_a.fstream", cwd=d)  # default output: beside the stream
-    assert piped.returncode == 0
-    assert "\r" not in piped.stderr and "sample/s" not in piped.stderr, "quiet in a pipe"
-    m = re.search(r"replayed (\d+) samples in .*: received (\d+) measurements: (\d+) applied, (\d+) duplicates "
-                  r"dropped, (\d+) refused", piped.stdout)
-    assert m, piped.stdout
-    assert int(m.group(2)) == sum(map(int, m.groups()[2:]))
-    assert "wrote recordings/cv1d_a-replay.rrd" in piped.stdout
-    assert (d / "recordings" / "cv1d_a-replay.rrd").exists()
+    m = re.search(r"replayed 60 samples in .*: received (\d+) measurements: (\d+) applied, (\d+) duplicates "
+                  r"dropped, (\d+) refused", out)
+    assert m, out
+    assert int(m.group(1)) == sum(map(int, m.groups()[1:]))
+    assert "wrote recordings/cv1d_a-replay.rrd" in out and (d / "recordings" / "cv1d_a-replay.rrd").exists()
 
 
-def test_inspect_into_a_closed_pipe_is_quiet(demo_dir: tuple[Path, str]) -> None:
+def test_quiet_in_a_pipe(demo_dir: tuple[Path, str, str]) -> None:
+    """No bar and no carriage return when stderr is not a terminal (the demo has a bar too)."""
+    _, _, err = demo_dir
+    assert "\r" not in err and "meas/s" not in err and "simulating" not in err
+
+
+def test_inspect_into_a_closed_pipe_is_quiet(demo_dir: tuple[Path, str, str]) -> None:
     """`fusion inspect X | head`: the reader goes away before the output; exit 141, no traceback."""
-    d, _ = demo_dir
+    d, _, _ = demo_dir
     p = start("fusion", "inspect", "recordings/cv1d_a.rrd", "--json", cwd=d)
     p.stdout.close()  # type: ignore[union-attr]
     err = p.stderr.read()  # type: ignore[union-attr]
