@@ -10,7 +10,7 @@ from typing import Any
 
 from fusion.cli import args as a
 from fusion.cli.progress import bar, wanted
-from fusion.cli.report import counts_line, duration
+from fusion.cli.report import counts_line, duration, flat_counts
 from fusion.cli.runner import CliError, Exit
 
 RRD_MAGIC = b"RRF2"
@@ -105,12 +105,7 @@ def replay(args: argparse.Namespace) -> int:
         except KeyboardInterrupt:
             raise CliError(Exit.INTERRUPTED, f"interrupted after {done[0]} of {done[1]} samples; the partial "
                                              f"recording {out} is complete (fusion inspect {out})") from None
-    c = r.counts
-    refused = {k[len("refused_"):]: v for k, v in sorted(c.items()) if k.startswith("refused_")}
-    line = counts_line({"received": c.get("received", 0), "applied": c.get("applied", 0),
-                        "duplicates": c.get("duplicates", 0), "refused": refused,
-                        "late_applied": c.get("late_applied", 0), "replays": c.get("replays", 0),
-                        "published": r.estimates})
+    line = counts_line(flat_counts(r.counts, published=r.estimates))
     print(f"replayed {r.records} samples in {duration(time.monotonic() - t0)}: {line}")
     print(f"  wrote {out}" + (f" and {args.estimates}" if args.estimates else ""))
     print(f"next:  fusion inspect {out}   or   rerun {out}")

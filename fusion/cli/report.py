@@ -12,18 +12,35 @@ from fusion import messages as m
 
 
 def counts_line(c: Mapping[str, Any]) -> str:
-    """received = applied + duplicates + refused + queued, said in that order."""
+    """received = applied + duplicates + refused + queued, said in that order, for measurements.
+
+    Services that count truth samples in `received` too (received = applied + truth + ...) are
+    recognised by that sum, so a client reads either kind of status."""
     refused: Mapping[str, int] = c.get("refused", {})
     n_ref = sum(refused.values())
+    truth = int(c.get("truth", 0))
+    handled = c["applied"] + c["duplicates"] + n_ref + int(c.get("queued", 0))
+    measurements = c["received"] - truth if truth and c["received"] == handled + truth else c["received"]
     parts = [f"{c['applied']} applied", f"{c['duplicates']} duplicates dropped",
              f"{n_ref} refused" + (" (" + ", ".join(f"{k} {v}" for k, v in sorted(refused.items())) + ")"
                                    if refused else "")]
     if c.get("queued"):
         parts.append(f"{c['queued']} not yet processed")
-    line = f"received {c['received']} measurements: " + ", ".join(parts)
+    line = f"received {measurements} measurements: " + ", ".join(parts)
     if c.get("late_applied"):
         line += f"; {c['late_applied']} late ones folded in by {c['replays']} replay{'s' if c['replays'] != 1 else ''}"
     return line + f"; published {c['published']} estimates"
+
+
+def flat_counts(c: Mapping[str, int], *, published: int) -> dict[str, Any]:
+    """A pipeline's flat counts ("refused_<reason>" or "refused/<reason>" keys, duplicates as
+    "duplicates" or "refused/duplicate") in the shape counts_line reads."""
+    refused = {k[len("refused_"):] if k.startswith("refused_") else k[len("refused/"):]: v
+               for k, v in sorted(c.items()) if k.startswith(("refused_", "refused/")) and v}
+    duplicates = c.get("duplicates", refused.pop("duplicate", 0))
+    return {"received": c.get("received", 0), "applied": c.get("applied", 0), "duplicates": duplicates,
+            "refused": refused, "truth": c.get("truth", 0), "late_applied": c.get("late_applied", 0),
+            "replays": c.get("replays", 0), "published": published}
 
 
 def size(n_bytes: int) -> str:
@@ -42,7 +59,8 @@ def format_status(st: m.ServiceStatus, namespace: str) -> str:
     c = st.counts
     tracks = ", ".join(f"{v} {k}" for k, v in sorted(st.tracks.items())) or "none"
     counts = {"received": c.received, "applied": c.applied, "duplicates": c.duplicates, "refused": c.refused,
-              "queued": c.queued, "late_applied": c.late_applied, "replays": c.replays, "published": c.published}
+              "queued": c.queued, "late_applied": c.late_applied, "replays": c.replays, "published": c.published,
+              "truth": c.truth}
     lines = [
         f"fusion service on namespace {namespace!r}, up {duration(st.uptime_s)}",
         f"  samples    {counts_line(counts)}",
