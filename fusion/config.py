@@ -12,7 +12,7 @@ from typing import Annotated, Literal
 
 import msgspec
 
-from fusion.errors import ConfigError
+from fusion.config_errors import convert, decode_toml
 
 PosFloat = Annotated[float, msgspec.Meta(gt=0.0, le=1e12)]
 NonNegFloat = Annotated[float, msgspec.Meta(ge=0.0, le=1e12)]
@@ -184,19 +184,14 @@ class TrackerConfig(Section):
                 raise ValueError(f"sensor {s.id}: std_m must have {d} components")
 
 
-def decode_tracker_config(data: bytes | str) -> TrackerConfig:
-    """TrackerConfig from TOML text, with errors that name the field."""
-    try:
-        return msgspec.toml.decode(data, type=TrackerConfig)
-    except msgspec.ValidationError as e:
-        raise ConfigError(f"invalid tracker configuration: {e}") from e
-    except msgspec.DecodeError as e:
-        raise ConfigError(f"malformed TOML: {e}") from e
+def decode_tracker_config(data: bytes | str, *, source: str = "tracker configuration") -> TrackerConfig:
+    """TrackerConfig from TOML text; errors name the source, line and field (fusion.config_errors)."""
+    return convert(decode_toml(data, source=source), TrackerConfig, source=source, text=data)
 
 
 def load_tracker_config(path: str | Path) -> TrackerConfig:
     """Read a TrackerConfig from a TOML file."""
-    return decode_tracker_config(Path(path).read_bytes())
+    return decode_tracker_config(Path(path).read_bytes(), source=str(path))
 
 
 Ident = Annotated[str, msgspec.Meta(pattern=r"^[A-Za-z0-9_.\-]{1,64}\Z")]  # a sensor id, as in the keys
@@ -287,21 +282,17 @@ class ServiceConfig(Section):
     warnings_per_minute: Annotated[int, msgspec.Meta(ge=1)] = 60
 
 
-def decode_service_config(data: bytes | str) -> ServiceConfig:
-    """ServiceConfig from TOML text, with errors that name the field. A scenario file
-    (configs/scenarios/*.toml) works too: its [service] table is the service's configuration."""
-    try:
-        raw = msgspec.toml.decode(data)
-    except msgspec.DecodeError as e:
-        raise ConfigError(f"malformed TOML: {e}") from e
+def decode_service_config(data: bytes | str, *, source: str = "service configuration") -> ServiceConfig:
+    """ServiceConfig from TOML text; errors name the source, line and field (fusion.config_errors).
+    A scenario file (configs/scenarios/*.toml) works too: its [service] table is the service's
+    configuration."""
+    raw = decode_toml(data, source=source)
+    prefix: list[str | int] = []
     if isinstance(raw, dict) and "service" in raw and "tracker" not in raw:
-        raw = raw["service"]
-    try:
-        return msgspec.convert(raw, type=ServiceConfig)
-    except msgspec.ValidationError as e:
-        raise ConfigError(f"invalid service configuration: {e}") from e
+        raw, prefix = raw["service"], ["service"]
+    return convert(raw, ServiceConfig, source=source, text=data, prefix=prefix)
 
 
 def load_service_config(path: str | Path) -> ServiceConfig:
-    """Read a ServiceConfig from a TOML file."""
-    return decode_service_config(Path(path).read_bytes())
+    """Read a ServiceConfig from a TOML file (OSError if it cannot be read)."""
+    return decode_service_config(Path(path).read_bytes(), source=str(path))

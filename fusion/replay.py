@@ -7,9 +7,9 @@ sensor), and two replays give identical estimates.
 
 from __future__ import annotations
 
-import sys
 import time
-from dataclasses import dataclass
+from collections.abc import Callable
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from fusion import messages as m
@@ -28,6 +28,7 @@ CONFIGS = Path(__file__).resolve().parent.parent / "configs"
 class ReplayCounts:
     records: int
     estimates: int
+    counts: dict[str, int] = field(default_factory=dict)  # the pipeline's counts (applied, duplicates, ...)
 
 
 def _config_for(path: Path | None, namespace: str) -> ServiceConfig:
@@ -43,9 +44,11 @@ def _config_for(path: Path | None, namespace: str) -> ServiceConfig:
 
 
 def replay(stream: str | Path, *, config: str | Path | None = None, out: str | Path | None = None,
-           estimates: str | Path | None = None, realtime: bool = False, progress: bool = False,
-           batch: int = 1000) -> ReplayCounts:
-    """Replay `stream` (.fstream or .jsonl); write a recording to `out` and estimates to a .jsonl."""
+           estimates: str | Path | None = None, realtime: bool = False,
+           progress: Callable[[int, int], None] | None = None, batch: int = 1000) -> ReplayCounts:
+    """Replay `stream` (.fstream or .jsonl); write a recording to `out` and estimates to a .jsonl.
+    `progress(done, total)` is called after every batch of records (for a progress bar). Files
+    are closed complete even when interrupted (KeyboardInterrupt propagates)."""
     records, meta = read_records(stream)
     ns = str(meta.get("namespace", "demo"))
     cfg = _config_for(Path(config) if config else None, ns)
@@ -81,13 +84,11 @@ def replay(stream: str | Path, *, config: str | Path | None = None, out: str | P
                 n_est += 1
                 if est_file is not None:
                     est_file.write(m.encode_json(m.decode_estimate(enc(e))) + b"\n")
-            if progress:
-                sys.stderr.write(f"\rreplay {i}/{len(all_records)} samples ({100 * i // max(len(all_records), 1)} %)")
-        if progress:
-            sys.stderr.write("\n")
+            if progress is not None:
+                progress(i, len(all_records))
     finally:
         if est_file is not None:
             est_file.close()
         if sink is not None:
             sink.close()
-    return ReplayCounts(len(all_records), n_est)
+    return ReplayCounts(len(all_records), n_est, pipe.counts().flat())

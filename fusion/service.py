@@ -49,28 +49,11 @@ class Service:
         self.config = config
         self.ns = config.namespace
         self.tracker = Tracker(config.tracker)
-        rc = config.recording
         self.sink: RotatingSink | RerunSink | None = None
-        rdir = Path(recording_dir) if recording_dir is not None else Path(rc.directory)
-        common: dict[str, Any] = dict(
-            layout=self.tracker.layout, position_indices=self.tracker.position_indices,
-            velocity_indices=self.tracker.velocity_indices, flush_interval_s=rc.flush_interval_s,
-            meta={"namespace": self.ns, "sensors": sorted(self.tracker.sensors), "model": self.tracker.model_name},
-            counts=self._counts_for_recording,
-        )
-        if recording_path is not None:
-            self.sink = RerunSink(recording_path, recording_id=Path(recording_path).stem, **common)
-        elif rc.enabled:
-            self.sink = RotatingSink(rdir, prefix=rc.prefix, rotate_bytes=int(rc.rotate_mb * 1e6),
-                                     rotate_s=rc.rotate_s, **common)
-        self.stream = None
-        if stream_path is not None or (self.sink is not None and rc.stream):
-            from fusion.io.streamfile import StreamWriter
-
-            sp = Path(stream_path) if stream_path is not None else self.sink.path.with_suffix(wire.STREAM_SUFFIX)  # type: ignore[union-attr]
-            self.stream = StreamWriter(sp, namespace=self.ns)
+        self.stream: Any = None
+        self._outputs = (recording_dir, recording_path, stream_path)  # files are created by open()
         self.pipeline = Pipeline(
-            self.tracker, wire.Codec(self.ns), sink=self.sink,
+            self.tracker, wire.Codec(self.ns), sink=None,
             max_future_wall_ns=round(config.intake.max_future_wall_s * 1e9),
             publish_tentative=config.publish_tentative, warnings_per_minute=config.warnings_per_minute,
         )
@@ -106,11 +89,44 @@ class Service:
     def _on_snapshot(self, query: Any) -> None:
         query.reply(wire.snapshot_key(self.ns), self._snapshot_payload)
 
+    def _open_outputs(self) -> None:
+        """Create the recording and the stream file (only once the session is open, so that a
+        service that cannot start leaves no files behind)."""
+        recording_dir, recording_path, stream_path = self._outputs
+        rc = self.config.recording
+        rdir = Path(recording_dir) if recording_dir is not None else Path(rc.directory)
+        common: dict[str, Any] = dict(
+            layout=self.tracker.layout, position_indices=self.tracker.position_indices,
+            velocity_indices=self.tracker.velocity_indices, flush_interval_s=rc.flush_interval_s,
+            meta={"namespace": self.ns, "sensors": sorted(self.tracker.sensors), "model": self.tracker.model_name},
+            counts=self._counts_for_recording,
+        )
+        if recording_path is not None:
+            self.sink = RerunSink(recording_path, recording_id=Path(recording_path).stem, **common)
+        elif rc.enabled:
+            self.sink = RotatingSink(rdir, prefix=rc.prefix, rotate_bytes=int(rc.rotate_mb * 1e6),
+                                     rotate_s=rc.rotate_s, **common)
+        if stream_path is not None or (self.sink is not None and rc.stream):
+            from fusion.io.streamfile import StreamWriter
+
+            sp = Path(stream_path) if stream_path is not None else self.sink.path.with_suffix(wire.STREAM_SUFFIX)  # type: ignore[union-attr]
+            self.stream = StreamWriter(sp, namespace=self.ns)
+        self.pipeline.sink = self.sink
+
     def open(self) -> None:
-        """Open the Zenoh session and declare the subscriber and queryables."""
+        """Open the Zenoh session, then the output files, then declare the subscribers and
+        queryables."""
         zc = self.config.zenoh
         conf = zenoh_session_config(zc, namespace=self.ns)
         self.session = self._zenoh.open(conf)
+        try:
+            self._open_outputs()
+        except BaseException:
+            if self.sink is not None:
+                self.sink.close()
+            self.session.close()
+            self.session = None
+            raise
         self._refresh_status(force=True)
         s = self.session
         self._decls = [

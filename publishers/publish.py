@@ -12,7 +12,7 @@ import logging
 import threading
 import time
 from collections import Counter
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 from fusion.io.zenoh_bus import wait_for_match
@@ -22,8 +22,9 @@ log = logging.getLogger("publishers")
 
 
 def publish(session: Any, samples: Sequence[Sample], *, speed: float = 1.0, match_timeout_s: float = 10.0,
-            stop: threading.Event | None = None) -> Counter[str]:
-    """Put every sample on its key at its (scaled) arrival time; return counts per key kind."""
+            stop: threading.Event | None = None, progress: Callable[[int], None] | None = None) -> Counter[str]:
+    """Put every sample on its key at its (scaled) arrival time; return counts per key kind.
+    progress(n) is called with the number of samples put so far (for a progress bar)."""
     import zenoh
 
     pubs: dict[str, Any] = {}
@@ -51,6 +52,8 @@ def publish(session: Any, samples: Sequence[Sample], *, speed: float = 1.0, matc
                     time.sleep(wait)
             pubs[s.key].put(s.payload)
             counts[s.key.split("/")[2]] += 1
+            if progress is not None:
+                progress(counts.total())
     finally:
         for p in pubs.values():
             p.undeclare()

@@ -8,6 +8,7 @@ from typing import Annotated, Literal
 import msgspec
 
 from fusion.config import ServiceConfig
+from fusion.config_errors import convert, decode_toml
 from fusion.errors import ConfigError
 
 Prob = Annotated[float, msgspec.Meta(ge=0.0, le=1.0)]
@@ -73,12 +74,9 @@ class ScenarioFile(Spec, kw_only=True):
 
 
 def load_scenario_file(path: str | Path) -> ScenarioFile:
-    try:
-        return msgspec.toml.decode(Path(path).read_bytes(), type=ScenarioFile)
-    except msgspec.ValidationError as e:
-        raise ConfigError(f"{path}: invalid scenario file: {e}") from e
-    except msgspec.DecodeError as e:
-        raise ConfigError(f"{path}: malformed TOML: {e}") from e
+    """Read a scenario file; errors name the file, line and field (fusion.config_errors)."""
+    data = Path(path).read_bytes()
+    return convert(decode_toml(data, source=str(path)), ScenarioFile, source=str(path), text=data)
 
 
 CONFIG_DIR = Path(__file__).resolve().parent.parent / "configs" / "scenarios"

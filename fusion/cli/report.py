@@ -1,0 +1,101 @@
+"""What a person reads: counts, the service's status and its tracks, in words that match the
+numbers (a duplicate is a duplicate, not a refusal)."""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Mapping
+from typing import Any
+
+from fusion import messages as m
+
+
+def counts_line(c: Mapping[str, Any]) -> str:
+    """received = applied + truth + duplicates + refused + queued, said for measurements (the
+    truth samples a simulator sends beside them are not measurements)."""
+    refused: Mapping[str, int] = c.get("refused", {})
+    n_ref = sum(refused.values())
+    measurements = c["received"] - int(c.get("truth", 0))
+    parts = [f"{c['applied']} applied", f"{c['duplicates']} duplicates dropped",
+             f"{n_ref} refused" + (" (" + ", ".join(f"{k} {v}" for k, v in sorted(refused.items())) + ")"
+                                   if refused else "")]
+    if c.get("queued"):
+        parts.append(f"{c['queued']} not yet processed")
+    line = f"received {measurements} measurements: " + ", ".join(parts)
+    if c.get("late_applied"):
+        line += f"; {c['late_applied']} late ones folded in by {c['replays']} replay{'s' if c['replays'] != 1 else ''}"
+    return line + f"; published {c['published']} estimates"
+
+
+def flat_counts(c: Mapping[str, int], *, published: int) -> dict[str, Any]:
+    """A pipeline's flat counts (fusion.tracking.results.Counts.flat: "refused/<reason>" keys,
+    duplicates as "refused/duplicate") in the shape counts_line reads."""
+    refused = {k[len("refused/"):]: v for k, v in sorted(c.items()) if k.startswith("refused/") and v}
+    duplicates = refused.pop("duplicate", 0)
+    return {"received": c.get("received", 0), "applied": c.get("applied", 0), "duplicates": duplicates,
+            "refused": refused, "truth": c.get("truth", 0), "late_applied": c.get("late_applied", 0),
+            "replays": c.get("replays", 0), "published": published}
+
+
+def size(n_bytes: int) -> str:
+    return f"{n_bytes / 1e6:.1f} MB" if n_bytes >= 100_000 else f"{n_bytes / 1e3:.1f} kB"
+
+
+def duration(s: float) -> str:
+    if s < 120:
+        return f"{s:.1f} s"
+    if s < 7200:
+        return f"{int(s // 60)} min {int(s % 60)} s"
+    return f"{int(s // 3600)} h {int(s % 3600 // 60)} min"
+
+
+def format_status(st: m.ServiceStatus, namespace: str) -> str:
+    c = st.counts
+    tracks = ", ".join(f"{v} {k}" for k, v in sorted(st.tracks.items())) or "none"
+    counts = {"received": c.received, "applied": c.applied, "duplicates": c.duplicates, "refused": c.refused,
+              "queued": c.queued, "late_applied": c.late_applied, "replays": c.replays, "published": c.published,
+              "truth": c.truth}
+    lines = [
+        f"fusion service on namespace {namespace!r}, up {duration(st.uptime_s)}",
+        f"  samples    {counts_line(counts)}",
+        f"  truth      {c.truth} samples",
+        f"  tracks     {tracks}",
+        f"  queue      {st.queue_depth} waiting",
+        "  recording  " + (f"{st.recording} ({size(st.recording_bytes)})" if st.recording else "off"),
+    ]
+    for sensor, lat in sorted(st.latency.items()):
+        lines.append(f"  latency    {sensor}: mean {lat.mean_ms:.1f} ms, p50 {lat.p50_ms:.1f}, p99 {lat.p99_ms:.1f}, "
+                     f"max {lat.max_ms:.1f} ms over {lat.count} measurements")
+    return "\n".join(lines)
+
+
+_POSITION = ("x", "y", "z", "p")
+
+
+def _time(t_ns: int) -> str:
+    """Epoch times (after 1973) as UTC clock time; stream-relative times in seconds."""
+    if t_ns > 10**17:
+        return time.strftime("%H:%M:%S", time.gmtime(t_ns // 10**9)) + f".{t_ns % 10**9 // 10**6:03d}"
+    return f"{t_ns / 1e9:.3f} s"
+
+
+def format_tracks(snap: m.Snapshot, namespace: str) -> str:
+    """One row per confirmed track: its latest estimate, the position's standard deviation."""
+    est = sorted(snap.estimates, key=lambda e: e.track_id)
+    if not est:
+        return f"namespace {namespace!r}: no confirmed tracks right now"
+    layout = est[0].layout
+    head = ["track", "time", *layout, "pos std", "sensor", "NIS"]
+    rows = []
+    for e in est:
+        n = len(e.state)
+        pos = [i for i, name in enumerate(e.layout) if name in _POSITION]
+        std = math.sqrt(sum(e.cov[i * n + i] for i in pos)) if pos and len(e.cov) == n * n else float("nan")
+        rows.append([str(e.track_id), _time(e.t_ns), *(f"{v:.2f}" for v in e.state), f"{std:.2f}", e.sensor_id,
+                     "-" if e.nis is None else f"{e.nis:.2f}"])
+    widths = [max(len(r[i]) for r in [head, *rows]) for i in range(len(head))]
+    fmt = lambda r: "  ".join(x.rjust(w) for x, w in zip(r, widths, strict=True))  # noqa: E731
+    model = est[0].model
+    return "\n".join([f"namespace {namespace!r}: {len(est)} confirmed tracks (model {model}, latest estimate of each)",
+                      fmt(head), *map(fmt, rows)])

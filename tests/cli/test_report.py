@@ -1,0 +1,56 @@
+"""The words the CLI prints match the numbers (in-process: the wording functions alone)."""
+
+from __future__ import annotations
+
+import pytest
+
+from fusion import messages as m
+from fusion.cli.report import counts_line, flat_counts, format_status, format_tracks
+
+BASE = {"received": 838, "applied": 530, "duplicates": 4, "refused": {"invalid": 4}, "queued": 0, "truth": 300,
+        "late_applied": 8, "replays": 1, "published": 389}
+LINE = ("received 538 measurements: 530 applied, 4 duplicates dropped, 4 refused (invalid 4); 8 late ones folded "
+        "in by 1 replay; published 389 estimates")
+
+
+def test_counts_line_says_measurements_not_truth_samples() -> None:
+    """received counts every sample; the line speaks of the measurements among them."""
+    assert counts_line(BASE) == LINE
+
+
+def test_flat_pipeline_counts() -> None:
+    flat = {"received": 838, "truth": 300, "applied": 530, "refused/duplicate": 4, "refused/invalid": 4,
+            "refused/future": 0, "late_applied": 8, "replays": 1}
+    assert counts_line(flat_counts(flat, published=389)) == LINE
+
+
+def test_queued_and_no_late() -> None:
+    c = dict(BASE, received=840, queued=2, late_applied=0, replays=0, refused={})
+    assert counts_line(c) == ("received 540 measurements: 530 applied, 4 duplicates dropped, 0 refused, 2 not yet "
+                              "processed; published 389 estimates")
+
+
+def _estimate(track_id: int, x: float) -> m.Estimate:
+    return m.Estimate(track_id=track_id, t_ns=2_500_000_000, sensor_id="cam1", seq=3, state=[x, 1.0, 2.0, -1.0],
+                      cov=[4.0, 0, 0, 0, 0, 1.0, 0, 0, 0, 0, 5.0, 0, 0, 0, 0, 1.0], layout=["x", "vx", "y", "vy"],
+                      model="cv", status="confirmed", revision=0, nis=1.5)
+
+
+def test_tracks_table() -> None:
+    text = format_tracks(m.Snapshot(estimates=[_estimate(7, 10.0), _estimate(3, -5.0)]), "demo")
+    lines = text.splitlines()
+    assert lines[0] == "namespace 'demo': 2 confirmed tracks (model cv, latest estimate of each)"
+    assert lines[1].split() == ["track", "time", "x", "vx", "y", "vy", "pos", "std", "sensor", "NIS"]
+    assert lines[2].split() == ["3", "2.500", "s", "-5.00", "1.00", "2.00", "-1.00", "3.00", "cam1", "1.50"]
+    assert format_tracks(m.Snapshot(estimates=[]), "x") == "namespace 'x': no confirmed tracks right now"
+
+
+def test_status_text() -> None:
+    st = m.ServiceStatus(uptime_s=125.0, counts=m.Counts(received=10, applied=9, duplicates=1, refused={}, queued=0,
+                                                          replays=0, late_applied=0, published=7, truth=0),
+                         tracks={"confirmed": 2, "tentative": 1}, latency={}, recording="r.rrd",
+                         recording_bytes=2_000_000, queue_depth=0)
+    text = format_status(st, "demo")
+    assert text.splitlines()[0] == "fusion service on namespace 'demo', up 2 min 5 s"
+    assert "received 10 measurements: 9 applied, 1 duplicates dropped, 0 refused; published 7 estimates" in text
+    assert "2 confirmed, 1 tentative" in text and "r.rrd (2.0 MB)" in text
