@@ -144,10 +144,19 @@ class TimeConfig(Section):
     max_lag_scans: Annotated[int, msgspec.Meta(ge=1)] = 100_000
 
 
+class ControlConfig(Section):
+    """A known control input applied to every track through the motion model's B (for "cv":
+    an acceleration per axis, B_axis = [dt^2/2, dt]). Inputs come from `source_id`, are held
+    from their time until the next one, and are ordered and replayed with the measurements."""
+
+    source_id: SensorId
+
+
 class TrackerConfig(Section):
     """Everything the tracker needs."""
 
     sensors: list[SensorConfig]
+    control: ControlConfig | None = None
     motion: MotionConfig = MotionConfig()
     init: InitConfig = InitConfig()
     gate: GateConfig = GateConfig()
@@ -169,6 +178,10 @@ class TrackerConfig(Section):
             raise ValueError("motion.model = 'imm' needs at least two [[motion.modes]]")
         if m.model != "imm" and m.modes:
             raise ValueError("motion.modes are used only with motion.model = 'imm'")
+        if self.control is not None and m.model != "cv":
+            raise ValueError("a control input needs motion.model = 'cv' (its B is the acceleration input)")
+        if self.control is not None and self.control.source_id in ids:
+            raise ValueError(f"control.source_id {self.control.source_id!r} is also a sensor id")
         for s in self.sensors:
             if isinstance(s, RadarSensorConfig) and d == 1:
                 raise ValueError(f"sensor {s.id}: a radar needs a 2-D or 3-D state (motion.ndim)")

@@ -7,6 +7,7 @@ standard deviations are bounded, dimensions must match; the error names the fiel
 
 Key expressions, under a namespace NS (ids: letters, digits, '_', '-', '.'):
     fusion/NS/meas/SENSOR_ID     Measurement          (subscribe to fusion/NS/meas/* for all)
+    fusion/NS/input/SOURCE_ID    Input                (a known control input: fusion/NS/input/*)
     fusion/NS/truth/TARGET_ID    Truth                (fusion/NS/truth/*)
     fusion/NS/tracks/TRACK_ID    Estimate             (fusion/NS/tracks/*)
     fusion/NS/status             ServiceStatus        (queryable)
@@ -91,6 +92,21 @@ class Measurement(Base, tag="measurement", kw_only=True):
     data: Cartesian | Radar
 
 
+class Input(Base, tag="input", kw_only=True):
+    """A known control input of source `source_id` (e.g. a vehicle's commanded acceleration per
+    axis), in force from t_ns until the source's next input."""
+
+    v: Version = SCHEMA_VERSION
+    source_id: Id
+    t_ns: TimeNs
+    seq: Seq
+    u: list[Finite]
+
+    def __post_init__(self) -> None:
+        if not 1 <= len(self.u) <= 6:
+            raise ValueError(f"u must have 1 to 6 components, got {len(self.u)}")
+
+
 class Truth(Base, tag="truth", kw_only=True):
     """The true state of a simulated target; layout names its components (x, vx, y, vy, ...)."""
 
@@ -162,12 +178,13 @@ class Snapshot(Base, tag="snapshot", kw_only=True):
     estimates: list[Estimate]
 
 
-Message = Measurement | Truth | Estimate | ServiceStatus | Snapshot
+Message = Measurement | Input | Truth | Estimate | ServiceStatus | Snapshot
 
 _enc = msgspec.msgpack.Encoder()
 _json_enc = msgspec.json.Encoder()
 _dec_meas = msgspec.msgpack.Decoder(Measurement)
 _dec_truth = msgspec.msgpack.Decoder(Truth)
+_dec_input = msgspec.msgpack.Decoder(Input)
 _dec_est = msgspec.msgpack.Decoder(Estimate)
 _dec_status = msgspec.msgpack.Decoder(ServiceStatus)
 _dec_snap = msgspec.msgpack.Decoder(Snapshot)
@@ -197,6 +214,10 @@ def _decode(dec: msgspec.msgpack.Decoder | msgspec.json.Decoder, data: bytes | s
 
 def decode_measurement(data: bytes) -> Measurement:
     return _decode(_dec_meas, data, "measurement")  # type: ignore[return-value]
+
+
+def decode_input(data: bytes) -> Input:
+    return _decode(_dec_input, data, "input")  # type: ignore[return-value]
 
 
 def decode_truth(data: bytes) -> Truth:
@@ -239,6 +260,14 @@ def meas_key(ns: str, sensor_id: str) -> str:
     return f"fusion/{check_id('namespace', ns)}/meas/{check_id('sensor_id', sensor_id)}"
 
 
+def input_key(ns: str, source_id: str) -> str:
+    return f"fusion/{check_id('namespace', ns)}/input/{check_id('source_id', source_id)}"
+
+
+def all_input_key(ns: str) -> str:
+    return f"fusion/{check_id('namespace', ns)}/input/*"
+
+
 def truth_key(ns: str, target_id: str) -> str:
     return f"fusion/{check_id('namespace', ns)}/truth/{check_id('target_id', target_id)}"
 
@@ -268,8 +297,8 @@ def snapshot_key(ns: str) -> str:
 
 
 def key_kind(key: str) -> str:
-    """"meas", "truth", "tracks", "status", "snapshot" or "other" for a key expression."""
+    """"meas", "input", "truth", "tracks", "status", "snapshot" or "other" for a key expression."""
     parts = key.split("/")
     if len(parts) >= 3 and parts[0] == "fusion":
-        return parts[2] if parts[2] in ("meas", "truth", "tracks", "status", "snapshot") else "other"
+        return parts[2] if parts[2] in ("meas", "input", "truth", "tracks", "status", "snapshot") else "other"
     return "other"

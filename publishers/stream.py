@@ -91,6 +91,8 @@ def build_stream(spec: ScenarioSpec, *, namespace: str, t0_ns: int = 0) -> tuple
         msg = e.msg if t0_ns == 0 else m.Measurement(sensor_id=e.msg.sensor_id, t_ns=e.msg.t_ns + t0_ns,
                                                      seq=e.msg.seq, data=e.msg.data)
         samples.append(Sample(e.arrival_ns + t0_ns, m.meas_key(namespace, msg.sensor_id), m.encode(msg)))
+    if ref is not None and ref.u is not None:
+        samples.extend(_reference_inputs(ref, namespace, t0_ns, len(truths[0].t_ns)))
     for tr in truths:
         key = m.truth_key(namespace, tr.target_id)
         for t, x in zip(tr.t_ns.tolist(), tr.states, strict=True):
@@ -98,6 +100,21 @@ def build_stream(spec: ScenarioSpec, *, namespace: str, t0_ns: int = 0) -> tuple
             samples.append(Sample(int(t) + t0_ns, key, m.encode(msg)))
     samples.sort(key=lambda s: (s.arrival_ns, s.key, s.payload))
     return samples, truths
+
+
+CONTROL_SOURCE = "control"  # the source id of a reference scenario's known input (cv1d_d)
+
+
+def _reference_inputs(ref: Reference, namespace: str, t0_ns: int, n: int) -> list[Sample]:
+    """The reference scenario's known input: u[k] drives the step that ends at t_ns[k], so it is
+    published in force from the step's start (t_ns[k-1], or 0), on time."""
+    key = m.input_key(namespace, CONTROL_SOURCE)
+    out = []
+    for k in range(n):
+        t = (0 if k == 0 else int(ref.t_ns[k - 1])) + t0_ns
+        msg = m.Input(source_id=CONTROL_SOURCE, t_ns=t, seq=k, u=[float(v) for v in ref.u[k]])  # type: ignore[index]
+        out.append(Sample(t, key, m.encode(msg)))
+    return out
 
 
 def _stable(s: str) -> int:

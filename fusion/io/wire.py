@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 
 from fusion import messages as m
-from fusion.tracking.detection import Detection
+from fusion.tracking.detection import ControlInput, Detection
 from fusion.tracking.results import Estimate
 
 STREAM_SUFFIX = ".fstream"
@@ -19,6 +19,7 @@ snapshot_key = m.snapshot_key
 track_key = m.track_key
 all_measurements_key = m.all_meas_key
 all_truth_key = m.all_truth_key
+all_input_key = m.all_input_key
 
 
 def is_measurement_key(key: str) -> bool:
@@ -64,6 +65,10 @@ class Codec:
     def detection(self, payload: bytes, arrival_ns: int | None = None) -> Detection:
         """Raises MalformedMessageError or InvalidMessageError (fusion.errors) for bad bytes."""
         return detection_of(m.decode_measurement(payload), arrival_ns)
+
+    def control(self, payload: bytes, arrival_ns: int | None = None) -> ControlInput:
+        msg = m.decode_input(payload)
+        return ControlInput(msg.source_id, msg.t_ns, msg.seq, np.array(msg.u, dtype=np.float64), arrival_ns)
 
     def truth(self, payload: bytes, layout: tuple[str, ...]) -> tuple[str, int, np.ndarray] | None:
         return truth_in_layout(m.decode_truth(payload), layout)

@@ -30,10 +30,11 @@ def _q(psd: float) -> float:
     return math.sqrt(psd)
 
 
-def motion_model(cfg: MotionConfig) -> MotionModel:
-    """The motion model of a single-model tracker (the state space of an IMM's modes)."""
+def motion_model(cfg: MotionConfig, *, control: bool = False) -> MotionModel:
+    """The motion model of a single-model tracker (the state space of an IMM's modes); with
+    `control` the constant-velocity model takes an acceleration input."""
     if cfg.model == "cv":
-        return ConstantVelocity(ndim=cfg.ndim, q=_q(cfg.accel_psd_m2s3))
+        return ConstantVelocity(ndim=cfg.ndim, q=_q(cfg.accel_psd_m2s3), with_control=control)
     if cfg.model == "ca":
         return ConstantAcceleration(ndim=cfg.ndim, q=_q(cfg.accel_psd_m2s3))
     if cfg.model == "ct":
@@ -55,11 +56,11 @@ def layout(cfg: MotionConfig) -> tuple[str, ...]:
     return tuple(p + a for a in AXES[: cfg.ndim] for p in per)
 
 
-def make_filter(cfg: MotionConfig) -> Filter:
+def make_filter(cfg: MotionConfig, *, control: bool = False) -> Filter:
     """The track filter. Inputs are validated at intake, so the filters skip their checks."""
     if cfg.model == "imm":
         return build_imm(imm_modes(cfg), ndim=cfg.ndim, filter=cfg.filter, check=False)
-    m = motion_model(cfg)
+    m = motion_model(cfg, control=control)
     if cfg.filter == "ukf":
         return UnscentedKalmanFilter(m, check=False)
     return ExtendedKalmanFilter(m, check=False)
