@@ -23,7 +23,7 @@ from typing import Protocol
 
 import numpy as np
 
-from fusion.errors import InvalidMessageError, MalformedMessageError
+from fusion.errors import InvalidMessageError, MalformedMessageError, UnsupportedVersionError
 from fusion.io.latency import LatencyTracker
 from fusion.io.ratelimit import RateLimitedLog
 from fusion.publication import PublishedView
@@ -128,6 +128,9 @@ class Pipeline:
             d = self.codec.detection(payload, arrival_ns)
         except MalformedMessageError as e:
             self._refuse(Reason.MALFORMED, key, str(e))
+            return None
+        except UnsupportedVersionError as e:
+            self._refuse(Reason.UNSUPPORTED_VERSION, key, str(e))
             return None
         except InvalidMessageError as e:
             self._refuse(Reason.INVALID, key, str(e))

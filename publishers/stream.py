@@ -14,7 +14,7 @@ import numpy as np
 from fusion import messages as m
 from fusion.scenarios import REFERENCE_NAMES, Reference
 from publishers.sensors import Emitted, _latency_ns, simulate_sensor
-from publishers.spec import LatencySpec, ScenarioSpec, SensorSpec
+from publishers.spec import LatencySpec, ScenarioSpec, SensorSpec, SimulatedCartesian, SimulatedRadar
 from publishers.truth import TargetTruth, load_reference, mix_truth
 
 
@@ -35,16 +35,16 @@ def reference_sensor(ref: Reference, spec: SensorSpec | None) -> SensorSpec:
         "duplicate": spec.duplicate if spec else 0.0,
     }
     if ref.sensor_kind == "radar":
-        return SensorSpec(id=spec.id if spec else "radar", kind="radar", range_std_m=float(std[0]),
-                          bearing_std_rad=float(std[1]), **common)  # type: ignore[arg-type]
-    return SensorSpec(id=spec.id if spec else "pos", kind="cartesian", std_m=std.tolist(), **common)  # type: ignore[arg-type]
+        return SimulatedRadar(id=spec.id if spec else "radar", range_std_m=float(std[0]),
+                              bearing_std_rad=float(std[1]), **common)  # type: ignore[arg-type]
+    return SimulatedCartesian(id=spec.id if spec else "pos", std_m=std.tolist(), **common)  # type: ignore[arg-type]
 
 
 def _reference_messages(ref: Reference, sensor: SensorSpec, rng: np.random.Generator) -> list[Emitted]:
     """The reference scenario's own measurements, with the sensor's latency and losses."""
     out = []
     for k, (t, z) in enumerate(zip(ref.t_ns.tolist(), ref.z, strict=True)):
-        if sensor.kind == "radar":
+        if isinstance(sensor, SimulatedRadar):
             data: m.Cartesian | m.Radar = m.Radar(
                 range_m=float(z[0]), bearing_rad=float(z[1]), range_std_m=sensor.range_std_m,
                 bearing_std_rad=sensor.bearing_std_rad)

@@ -17,6 +17,7 @@ class Reason(StrEnum):
     INVALID = "invalid"  # wrong dimension, NaN/inf, bad sequence number or time
     BAD_COVARIANCE = "bad_covariance"  # a noise covariance that is not symmetric positive definite
     UNKNOWN_SENSOR = "unknown_sensor"
+    UNSUPPORTED_VERSION = "unsupported_version"  # a message of a schema version this build does not read
     KEY_MISMATCH = "key_mismatch"  # a sample whose payload names another sensor (or target) than its key
     DUPLICATE = "duplicate"  # same (sensor_id, seq) seen before
     TOO_LATE = "too_late"  # older than the out-of-order window
