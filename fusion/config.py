@@ -77,27 +77,35 @@ class MotionConfig(Section):
     """The motion model of every track.
 
     model: "cv" constant velocity, "ca" constant acceleration, "ct" coordinated turn (2-D),
-    "imm" an interacting multiple model over `modes`.
+    "imm" an interacting multiple model over `modes`, "custom" a user's model given by import
+    path (`custom`, `params`): checked at load (shapes, a finite-difference Jacobian check).
     accel_psd_m2s3: power spectral density of the white acceleration noise (m^2/s^3), q^2 in
     Q_axis = q^2 [[dt^3/3, dt^2/2], [dt^2/2, dt]]; for "ca" it is the jerk density (m^2/s^5).
     turn_psd_rad2s3: density of the white turn-rate noise of "ct" (rad^2/s^3).
     filter: "ekf" (exact KF on linear models) or "ukf".
     """
 
-    model: Literal["cv", "ca", "ct", "imm"] = "cv"
+    model: Literal["cv", "ca", "ct", "imm", "custom"] = "cv"
     ndim: Literal[1, 2, 3] = 2
     accel_psd_m2s3: NonNegFloat = 1.0
     turn_psd_rad2s3: NonNegFloat = 1e-4
     modes: list[ModeConfig] = []
     filter: Literal["ekf", "ukf"] = "ekf"
+    custom: str = ""  # "custom": the model's import path, "package.module:Name" (fusion.models.loader)
+    params: dict[str, float | int | list[float]] = {}  # "custom": keyword arguments of Name
+    state_names: list[str] = []  # "custom": a name per state component (default: the model's)
 
 
 class InitConfig(Section):
-    """Single-point initiation: position from the measurement, zero velocity with this spread."""
+    """Single-point initiation: position from the measurement, zero for the rest with this
+    spread; state_std (one value per state component, the position's ignored) replaces the
+    named ones, and is needed for a custom model with components other than position and
+    velocity."""
 
     velocity_std_mps: PosFloat = 30.0
     acceleration_std_mps2: PosFloat = 5.0
     turn_rate_std_radps: PosFloat = 0.2
+    state_std: list[PosFloat] = []
 
 
 class GateConfig(Section):
@@ -178,6 +186,10 @@ class TrackerConfig(Section):
             raise ValueError("motion.model = 'imm' needs at least two [[motion.modes]]")
         if m.model != "imm" and m.modes:
             raise ValueError("motion.modes are used only with motion.model = 'imm'")
+        if m.model == "custom" and not m.custom:
+            raise ValueError("motion.model = 'custom' needs motion.custom = 'package.module:Name'")
+        if m.model != "custom" and (m.custom or m.params or m.state_names):
+            raise ValueError("motion.custom, params and state_names are used only with motion.model = 'custom'")
         if self.control is not None and m.model != "cv":
             raise ValueError("a control input needs motion.model = 'cv' (its B is the acceleration input)")
         if self.control is not None and self.control.source_id in ids:

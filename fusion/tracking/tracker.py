@@ -53,9 +53,9 @@ class Tracker:
         self.config = config
         control = config.control is not None
         self.motion = motion_model(config.motion, control=control)
-        self.filter = make_filter(config.motion, control=control)
+        self.filter = make_filter(config.motion, self.motion)
         self.inputs = InputTimeline(self.motion, config.motion.ndim) if control else None  # type: ignore[arg-type]
-        self.layout = layout(config.motion)
+        self.layout = layout(config.motion, self.motion)
         self.model_name = config.motion.model
         self.sensors = sensor_models(config, self.motion)
         self.position_indices = tuple(self.motion.position_indices)
