@@ -77,27 +77,35 @@ class MotionConfig(Section):
     """The motion model of every track.
 
     model: "cv" constant velocity, "ca" constant acceleration, "ct" coordinated turn (2-D),
-    "imm" an interacting multiple model over `modes`.
+    "imm" an interacting multiple model over `modes`, "custom" a user's model given by import
+    path (`custom`, `params`): checked at load (shapes, a finite-difference Jacobian check).
     accel_psd_m2s3: power spectral density of the white acceleration noise (m^2/s^3), q^2 in
     Q_axis = q^2 [[dt^3/3, dt^2/2], [dt^2/2, dt]]; for "ca" it is the jerk density (m^2/s^5).
     turn_psd_rad2s3: density of the white turn-rate noise of "ct" (rad^2/s^3).
     filter: "ekf" (exact KF on linear models) or "ukf".
     """
 
-    model: Literal["cv", "ca", "ct", "imm"] = "cv"
+    model: Literal["cv", "ca", "ct", "imm", "custom"] = "cv"
     ndim: Literal[1, 2, 3] = 2
     accel_psd_m2s3: NonNegFloat = 1.0
     turn_psd_rad2s3: NonNegFloat = 1e-4
     modes: list[ModeConfig] = []
     filter: Literal["ekf", "ukf"] = "ekf"
+    custom: str = ""  # "custom": the model's import path, "package.module:Name" (fusion.models.loader)
+    params: dict[str, float | int | list[float]] = {}  # "custom": keyword arguments of Name
+    state_names: list[str] = []  # "custom": a name per state component (default: the model's)
 
 
 class InitConfig(Section):
-    """Single-point initiation: position from the measurement, zero velocity with this spread."""
+    """Single-point initiation: position from the measurement, zero for the rest with this
+    spread; state_std (one value per state component, the position's ignored) replaces the
+    named ones, and is needed for a custom model with components other than position and
+    velocity."""
 
     velocity_std_mps: PosFloat = 30.0
     acceleration_std_mps2: PosFloat = 5.0
     turn_rate_std_radps: PosFloat = 0.2
+    state_std: list[PosFloat] = []
 
 
 class GateConfig(Section):
@@ -144,10 +152,19 @@ class TimeConfig(Section):
     max_lag_scans: Annotated[int, msgspec.Meta(ge=1)] = 100_000
 
 
+class ControlConfig(Section):
+    """A known control input applied to every track through the motion model's B (for "cv":
+    an acceleration per axis, B_axis = [dt^2/2, dt]). Inputs come from `source_id`, are held
+    from their time until the next one, and are ordered and replayed with the measurements."""
+
+    source_id: SensorId
+
+
 class TrackerConfig(Section):
     """Everything the tracker needs."""
 
     sensors: list[SensorConfig]
+    control: ControlConfig | None = None
     motion: MotionConfig = MotionConfig()
     init: InitConfig = InitConfig()
     gate: GateConfig = GateConfig()
@@ -169,6 +186,14 @@ class TrackerConfig(Section):
             raise ValueError("motion.model = 'imm' needs at least two [[motion.modes]]")
         if m.model != "imm" and m.modes:
             raise ValueError("motion.modes are used only with motion.model = 'imm'")
+        if m.model == "custom" and not m.custom:
+            raise ValueError("motion.model = 'custom' needs motion.custom = 'package.module:Name'")
+        if m.model != "custom" and (m.custom or m.params or m.state_names):
+            raise ValueError("motion.custom, params and state_names are used only with motion.model = 'custom'")
+        if self.control is not None and m.model != "cv":
+            raise ValueError("a control input needs motion.model = 'cv' (its B is the acceleration input)")
+        if self.control is not None and self.control.source_id in ids:
+            raise ValueError(f"control.source_id {self.control.source_id!r} is also a sensor id")
         for s in self.sensors:
             if isinstance(s, RadarSensorConfig) and d == 1:
                 raise ValueError(f"sensor {s.id}: a radar needs a 2-D or 3-D state (motion.ndim)")

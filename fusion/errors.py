@@ -8,7 +8,8 @@ FusionError
 │   ├── TimeError              a time step that goes backwards (negative dt)
 │   └── MessageError           bytes from the wire that are not the message expected
 │       ├── MalformedMessageError   they do not decode (truncated, not msgpack/JSON, bad UTF-8)
-│       └── InvalidMessageError     they decode but break the schema (the field is named)
+│       ├── InvalidMessageError     they decode but break the schema (the field is named)
+│       │   └── UnsupportedVersionError   a schema version this build does not read
 ├── NumericalError             a computation produced a non-PD covariance (ArithmeticError too)
 └── ConfigError                a configuration that cannot work (ValueError too)
 """
@@ -58,3 +59,7 @@ class MalformedMessageError(MessageError):
 
 class InvalidMessageError(MessageError):
     """A message that decodes but breaks the schema; the text names the field."""
+
+
+class UnsupportedVersionError(InvalidMessageError):
+    """A message of a schema version this build does not read."""

@@ -1,12 +1,14 @@
 """The wire schema: msgspec Structs, msgpack on the wire (JSON for humans and .jsonl files).
 
-Every message is frozen, refuses unknown fields, and carries a schema version `v`. Validation
+Every message is frozen, refuses unknown fields, and carries its schema version `v` on the
+wire; a message of another version is refused as unsupported_version, with the reason. Validation
 happens at decode: NaN and inf are refused (every float has both bounds), angles, ranges and
 standard deviations are bounded, dimensions must match; the error names the field
 (`Expected float >= 0.0, got -1.0 - at $.data.range_std_m`).
 
 Key expressions, under a namespace NS (ids: letters, digits, '_', '-', '.'):
     fusion/NS/meas/SENSOR_ID     Measurement          (subscribe to fusion/NS/meas/* for all)
+    fusion/NS/input/SOURCE_ID    Input                (a known control input: fusion/NS/input/*)
     fusion/NS/truth/TARGET_ID    Truth                (fusion/NS/truth/*)
     fusion/NS/tracks/TRACK_ID    Estimate             (fusion/NS/tracks/*)
     fusion/NS/status             ServiceStatus        (queryable)
@@ -21,7 +23,13 @@ from typing import Annotated, Literal
 
 import msgspec
 
-from fusion.errors import InputError, InvalidMessageError, MalformedMessageError, MessageError  # noqa: F401 (MessageError: re-exported)
+from fusion.errors import (  # noqa: F401 (MessageError: re-exported)
+    InputError,
+    InvalidMessageError,
+    MalformedMessageError,
+    MessageError,
+    UnsupportedVersionError,
+)
 
 SCHEMA_VERSION = 1
 _BIG = 1e15
@@ -37,13 +45,20 @@ Id = Annotated[str, msgspec.Meta(pattern=r"^[A-Za-z0-9_.\-]{1,64}$")]
 Version = Annotated[int, msgspec.Meta(ge=1, le=SCHEMA_VERSION)]
 
 
+def _schema_version() -> int:
+    """v's default, as a factory: msgspec omits defaults from the wire (omit_defaults) but not
+    a factory's value, so every message carries its schema version."""
+    return SCHEMA_VERSION
+
+
 class Base(msgspec.Struct, frozen=True, forbid_unknown_fields=True, kw_only=True, omit_defaults=True):
     """Base of every message."""
 
 
 class Cartesian(Base, tag="cartesian", kw_only=True):
-    """A measured position (1-D, 2-D or 3-D) with its noise: per-axis std_m, or a full row-major
-    covariance cov_m2 (d*d values). Exactly one of the two."""
+    """A measured position (1-D, 2-D or 3-D) in the sensor's frame, with its noise: per-axis
+    std_m, or a full row-major covariance cov_m2 (d*d values), at most one of the two; with
+    neither, the sensor's configured noise applies."""
 
     pos_m: list[Finite]
     std_m: list[Positive] | None = None
@@ -53,8 +68,8 @@ class Cartesian(Base, tag="cartesian", kw_only=True):
         d = len(self.pos_m)
         if d not in (1, 2, 3):
             raise ValueError(f"pos_m must have 1, 2 or 3 components, got {d}")
-        if (self.std_m is None) == (self.cov_m2 is None):
-            raise ValueError("give exactly one of std_m and cov_m2")
+        if self.std_m is not None and self.cov_m2 is not None:
+            raise ValueError("give at most one of std_m and cov_m2")
         if self.std_m is not None and len(self.std_m) != d:
             raise ValueError(f"std_m must have {d} components, got {len(self.std_m)}")
         if self.cov_m2 is not None and len(self.cov_m2) != d * d:
@@ -63,38 +78,62 @@ class Cartesian(Base, tag="cartesian", kw_only=True):
 
 class Radar(Base, tag="radar", kw_only=True):
     """A radar return relative to the sensor's pose: range, bearing, optional elevation (3-D) and
-    range rate, each with its standard deviation (present exactly when the value is)."""
+    range rate. Its noise is either complete (a standard deviation for every value present) or
+    absent (the sensor's configured noise applies)."""
 
     range_m: Range
     bearing_rad: Bearing
-    range_std_m: Positive
-    bearing_std_rad: Positive
+    range_std_m: Positive | None = None
+    bearing_std_rad: Positive | None = None
     elevation_rad: Elevation | None = None
     elevation_std_rad: Positive | None = None
     range_rate_mps: Finite | None = None
     range_rate_std_mps: Positive | None = None
 
     def __post_init__(self) -> None:
-        if (self.elevation_rad is None) != (self.elevation_std_rad is None):
-            raise ValueError("elevation_rad and elevation_std_rad go together")
-        if (self.range_rate_mps is None) != (self.range_rate_std_mps is None):
-            raise ValueError("range_rate_mps and range_rate_std_mps go together")
+        values = [True, True, self.elevation_rad is not None, self.range_rate_mps is not None]
+        stds = [self.range_std_m, self.bearing_std_rad, self.elevation_std_rad, self.range_rate_std_mps]
+        if any(s is not None and not v for s, v in zip(stds, values, strict=True)):
+            raise ValueError("a standard deviation is given for a value that is absent")
+        given = [s is not None for s, v in zip(stds, values, strict=True) if v]
+        if any(given) and not all(given):
+            raise ValueError("give a standard deviation for every value present (range, bearing, and elevation "
+                             "and range rate when present), or none to use the sensor's configured noise")
+
+    @property
+    def has_noise(self) -> bool:
+        return self.range_std_m is not None
 
 
 class Measurement(Base, tag="measurement", kw_only=True):
     """One measurement of one sensor at sensor time t_ns (integer nanoseconds)."""
 
-    v: Version = SCHEMA_VERSION
+    v: Version = msgspec.field(default_factory=_schema_version)
     sensor_id: Id
     t_ns: TimeNs
     seq: Seq
     data: Cartesian | Radar
 
 
+class Input(Base, tag="input", kw_only=True):
+    """A known control input of source `source_id` (e.g. a vehicle's commanded acceleration per
+    axis), in force from t_ns until the source's next input."""
+
+    v: Version = msgspec.field(default_factory=_schema_version)
+    source_id: Id
+    t_ns: TimeNs
+    seq: Seq
+    u: list[Finite]
+
+    def __post_init__(self) -> None:
+        if not 1 <= len(self.u) <= 6:
+            raise ValueError(f"u must have 1 to 6 components, got {len(self.u)}")
+
+
 class Truth(Base, tag="truth", kw_only=True):
     """The true state of a simulated target; layout names its components (x, vx, y, vy, ...)."""
 
-    v: Version = SCHEMA_VERSION
+    v: Version = msgspec.field(default_factory=_schema_version)
     target_id: Id
     t_ns: TimeNs
     state: list[Finite]
@@ -109,7 +148,7 @@ class Estimate(Base, tag="estimate", kw_only=True):
     """A track's estimate after a measurement update. A higher revision replaces an earlier
     estimate of the same (track_id, t_ns, sensor_id); status "retracted" withdraws it."""
 
-    v: Version = SCHEMA_VERSION
+    v: Version = msgspec.field(default_factory=_schema_version)
     track_id: int
     t_ns: TimeNs
     sensor_id: str
@@ -147,7 +186,7 @@ class Counts(Base, kw_only=True):
 
 
 class ServiceStatus(Base, tag="status", kw_only=True):
-    v: Version = SCHEMA_VERSION
+    v: Version = msgspec.field(default_factory=_schema_version)
     uptime_s: float
     counts: Counts
     tracks: dict[str, int]  # by status
@@ -158,16 +197,17 @@ class ServiceStatus(Base, tag="status", kw_only=True):
 
 
 class Snapshot(Base, tag="snapshot", kw_only=True):
-    v: Version = SCHEMA_VERSION
+    v: Version = msgspec.field(default_factory=_schema_version)
     estimates: list[Estimate]
 
 
-Message = Measurement | Truth | Estimate | ServiceStatus | Snapshot
+Message = Measurement | Input | Truth | Estimate | ServiceStatus | Snapshot
 
 _enc = msgspec.msgpack.Encoder()
 _json_enc = msgspec.json.Encoder()
 _dec_meas = msgspec.msgpack.Decoder(Measurement)
 _dec_truth = msgspec.msgpack.Decoder(Truth)
+_dec_input = msgspec.msgpack.Decoder(Input)
 _dec_est = msgspec.msgpack.Decoder(Estimate)
 _dec_status = msgspec.msgpack.Decoder(ServiceStatus)
 _dec_snap = msgspec.msgpack.Decoder(Snapshot)
@@ -189,6 +229,9 @@ def _decode(dec: msgspec.msgpack.Decoder | msgspec.json.Decoder, data: bytes | s
     try:
         return dec.decode(data)
     except msgspec.ValidationError as e:
+        if str(e).endswith("at `$.v`"):
+            raise UnsupportedVersionError(f"{what} of an unsupported schema version ({e}); this service reads "
+                                          f"version {SCHEMA_VERSION}: upgrade it or the sender") from None
         raise InvalidMessageError(f"invalid {what}: {e}") from None
     except (msgspec.DecodeError, UnicodeDecodeError, ValueError, OverflowError) as e:
         # msgspec raises UnicodeDecodeError for invalid UTF-8 in a string, not DecodeError
@@ -197,6 +240,10 @@ def _decode(dec: msgspec.msgpack.Decoder | msgspec.json.Decoder, data: bytes | s
 
 def decode_measurement(data: bytes) -> Measurement:
     return _decode(_dec_meas, data, "measurement")  # type: ignore[return-value]
+
+
+def decode_input(data: bytes) -> Input:
+    return _decode(_dec_input, data, "input")  # type: ignore[return-value]
 
 
 def decode_truth(data: bytes) -> Truth:
@@ -239,6 +286,14 @@ def meas_key(ns: str, sensor_id: str) -> str:
     return f"fusion/{check_id('namespace', ns)}/meas/{check_id('sensor_id', sensor_id)}"
 
 
+def input_key(ns: str, source_id: str) -> str:
+    return f"fusion/{check_id('namespace', ns)}/input/{check_id('source_id', source_id)}"
+
+
+def all_input_key(ns: str) -> str:
+    return f"fusion/{check_id('namespace', ns)}/input/*"
+
+
 def truth_key(ns: str, target_id: str) -> str:
     return f"fusion/{check_id('namespace', ns)}/truth/{check_id('target_id', target_id)}"
 
@@ -268,8 +323,8 @@ def snapshot_key(ns: str) -> str:
 
 
 def key_kind(key: str) -> str:
-    """"meas", "truth", "tracks", "status", "snapshot" or "other" for a key expression."""
+    """"meas", "input", "truth", "tracks", "status", "snapshot" or "other" for a key expression."""
     parts = key.split("/")
     if len(parts) >= 3 and parts[0] == "fusion":
-        return parts[2] if parts[2] in ("meas", "truth", "tracks", "status", "snapshot") else "other"
+        return parts[2] if parts[2] in ("meas", "input", "truth", "tracks", "status", "snapshot") else "other"
     return "other"

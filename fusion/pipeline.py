@@ -9,8 +9,8 @@ a replay reproduces the live run's estimates exactly, however the records are ba
 A measurement must come on its own sensor's key (`.../meas/<sensor_id>`), truth on its own
 target's key: anyone who may publish on one key cannot speak for another sensor.
 
-Counts add up: received = applied + truth + sum(refused by reason), where received is every
-sample handed to `ingest` and duplicates are refusals with reason "duplicate".
+Counts add up: received = applied + inputs + truth + sum(refused by reason), where received
+is every sample handed to `ingest` and duplicates are refusals with reason "duplicate".
 """
 
 from __future__ import annotations
@@ -23,11 +23,11 @@ from typing import Protocol
 
 import numpy as np
 
-from fusion.errors import InvalidMessageError, MalformedMessageError
+from fusion.errors import InvalidMessageError, MalformedMessageError, UnsupportedVersionError
 from fusion.io.latency import LatencyTracker
 from fusion.io.ratelimit import RateLimitedLog
 from fusion.publication import PublishedView
-from fusion.tracking.detection import Detection, Reason
+from fusion.tracking.detection import ControlInput, Detection, Reason
 from fusion.tracking.results import Counts, Estimate, StepResult
 from fusion.tracking.tracker import Tracker
 
@@ -49,6 +49,8 @@ class Codec(Protocol):
         ...
 
     def detection(self, payload: bytes, arrival_ns: int | None = None) -> Detection: ...
+
+    def control(self, payload: bytes, arrival_ns: int | None = None) -> ControlInput: ...
 
     def truth(self, payload: bytes, layout: tuple[str, ...]) -> tuple[str, int, np.ndarray] | None:
         """(target_id, t_ns, state in `layout`), None when the truth lacks a component."""
@@ -100,8 +102,9 @@ class Pipeline:
         if self.sink is not None:
             self.sink.log_text(t_ns, f"refused sample on {key}: {reason.value}: {detail}", "WARN")
 
-    def _decode(self, arrival_ns: int, key: str, payload: bytes) -> Detection | None:
-        """One sample: a Detection to track, or None (truth recorded, or refused and counted)."""
+    def _decode(self, arrival_ns: int, key: str, payload: bytes) -> Detection | ControlInput | None:
+        """One sample: a Detection or ControlInput for the tracker, or None (truth recorded, or
+        refused and counted)."""
         kind = self.codec.kind(key)
         try:
             if kind == "truth":
@@ -113,12 +116,21 @@ class Pipeline:
                 if tr is not None and self.sink is not None:
                     self.sink.log_truth(*tr)
                 return None
+            if kind == "input":
+                c = self.codec.control(payload, arrival_ns)
+                if c.source_id != self.codec.key_id(key):
+                    self._refuse(Reason.KEY_MISMATCH, key, f"an input of {c.source_id!r} on another source's key")
+                    return None
+                return c
             if kind != "meas":
-                self._refuse(Reason.INVALID, key, "not a measurement or truth key")
+                self._refuse(Reason.INVALID, key, "not a measurement, input or truth key")
                 return None
             d = self.codec.detection(payload, arrival_ns)
         except MalformedMessageError as e:
             self._refuse(Reason.MALFORMED, key, str(e))
+            return None
+        except UnsupportedVersionError as e:
+            self._refuse(Reason.UNSUPPORTED_VERSION, key, str(e))
             return None
         except InvalidMessageError as e:
             self._refuse(Reason.INVALID, key, str(e))
@@ -141,7 +153,7 @@ class Pipeline:
 
     def ingest(self, records: Sequence[Record]) -> Output:
         """Process samples in arrival order; return the tracker's result and what to publish."""
-        dets: list[Detection] = []
+        dets: list[Detection | ControlInput] = []
         last_arrival = None
         for arrival_ns, key, payload in records:
             self._received += 1

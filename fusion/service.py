@@ -131,6 +131,7 @@ class Service:
         s = self.session
         self._decls = [
             s.declare_subscriber(wire.all_measurements_key(self.ns), self._on_sample),
+            s.declare_subscriber(wire.all_input_key(self.ns), self._on_sample),
             s.declare_subscriber(wire.all_truth_key(self.ns), self._on_sample),
             s.declare_queryable(wire.status_key(self.ns), self._on_status),
             s.declare_queryable(wire.snapshot_key(self.ns), self._on_snapshot),
@@ -194,12 +195,12 @@ class Service:
         """Stop intake, drain, close the recording and the session (idempotent)."""
         if self.session is None:
             return
-        for d in self._decls[:2]:  # subscribers: no more intake
+        for d in self._decls[:3]:  # subscribers: no more intake
             d.undeclare()
         while self._q:
             self._step(self._drain(self.config.intake.batch_max))
         self._refresh_status(force=True)
-        for d in self._decls[2:]:
+        for d in self._decls[3:]:
             d.undeclare()
         self._decls = []
         if self.sink is not None:

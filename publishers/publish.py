@@ -33,7 +33,7 @@ def publish(session: Any, samples: Sequence[Sample], *, speed: float = 1.0, matc
             pubs[s.key] = session.declare_publisher(s.key, congestion_control=zenoh.CongestionControl.BLOCK)
     counts: Counter[str] = Counter()
     try:
-        meas = [k for k in sorted(pubs) if "/meas/" in k]
+        meas = [k for k in sorted(pubs) if "/meas/" in k or "/input/" in k]
         for k in meas:
             if not wait_for_match(pubs[k], timeout_s=match_timeout_s):
                 log.warning("no subscriber matched %s within %.1f s; publishing anyway", k, match_timeout_s)

@@ -15,7 +15,8 @@ import numpy as np
 
 from fusion import messages as m
 from fusion.core.measurement import wrap_angle
-from publishers.spec import SensorSpec
+from fusion.core.pose import Pose
+from publishers.spec import SensorSpec, SimulatedCartesian, SimulatedRadar
 from publishers.truth import TargetTruth
 
 
@@ -35,26 +36,36 @@ def _scan_times(t_ns: np.ndarray, rate_hz: float | None) -> np.ndarray:
     return idx
 
 
-def _radar(spec: SensorSpec, pos: np.ndarray, vel: np.ndarray | None, rng: np.random.Generator) -> m.Radar:
-    s = np.asarray(spec.position_m or [0.0] * len(pos), dtype=np.float64)
-    d = pos - s
+def _pose(spec: SensorSpec, d: int) -> Pose:
+    angles = {"heading_rad": spec.heading_rad} if d > 1 else {}
+    if d == 3:
+        angles.update(pitch_rad=spec.pitch_rad, roll_rad=spec.roll_rad)
+    return Pose.create(spec.position_m or [0.0] * d, **angles)
+
+
+def _radar(spec: SimulatedRadar, pos: np.ndarray, vel: np.ndarray | None, rng: np.random.Generator) -> m.Radar:
+    """Range, bearing (elevation in 3-D), range rate of a world point, in the radar's frame."""
+    pose = _pose(spec, len(pos))
+    d = pose.to_sensor(pos)
     r = float(np.linalg.norm(d))
-    b = float(wrap_angle(np.arctan2(d[1], d[0]) - spec.heading_rad + rng.normal(0, spec.bearing_std_rad)))
+    b = float(wrap_angle(np.arctan2(d[1], d[0]) + rng.normal(0, spec.bearing_std_rad)))
     kw: dict[str, float] = {}
     if len(pos) == 3:
         el = np.arctan2(d[2], np.hypot(d[0], d[1])) + rng.normal(0, spec.elevation_std_rad)
         kw["elevation_rad"] = float(np.clip(el, -np.pi / 2, np.pi / 2))
-        kw["elevation_std_rad"] = spec.elevation_std_rad
+        kw["elevation_std_rad"] = spec.elevation_std_rad  # type: ignore[assignment]
     if spec.range_rate and vel is not None:
-        kw["range_rate_mps"] = float(d @ vel / r + rng.normal(0, spec.range_rate_std_mps))
-        kw["range_rate_std_mps"] = spec.range_rate_std_mps
+        kw["range_rate_mps"] = float((pos - pose.t) @ vel / r + rng.normal(0, spec.range_rate_std_mps))
+        kw["range_rate_std_mps"] = spec.range_rate_std_mps  # type: ignore[assignment]
     return m.Radar(range_m=max(r + rng.normal(0, spec.range_std_m), 1e-3), bearing_rad=b,
                    range_std_m=spec.range_std_m, bearing_std_rad=spec.bearing_std_rad, **kw)
 
 
-def _cartesian(spec: SensorSpec, pos: np.ndarray, rng: np.random.Generator) -> m.Cartesian:
+def _cartesian(spec: SimulatedCartesian, pos: np.ndarray, rng: np.random.Generator) -> m.Cartesian:
+    """A world point in the sensor's frame, with the sensor's noise."""
     std = np.asarray(spec.std_m, dtype=np.float64)
-    return m.Cartesian(pos_m=(pos + rng.normal(0, 1, len(pos)) * std).tolist(), std_m=std.tolist())
+    z = _pose(spec, len(pos)).to_sensor(pos)
+    return m.Cartesian(pos_m=(z + rng.normal(0, 1, len(pos)) * std).tolist(), std_m=std.tolist())
 
 
 def _latency_ns(spec: SensorSpec, rng: np.random.Generator) -> int:
@@ -79,11 +90,12 @@ def simulate_sensor(spec: SensorSpec, truths: list[TargetTruth], rng: np.random.
             pos = tr.positions()[k]
             vel_idx = [tr.layout.index(a) for a in ("vx", "vy", "vz")[:d] if a in tr.layout]
             vel = tr.states[k, vel_idx] if len(vel_idx) == d else None
-            datas.append(_radar(spec, pos, vel, rng) if spec.kind == "radar" else _cartesian(spec, pos, rng))
+            radar = isinstance(spec, SimulatedRadar)
+            datas.append(_radar(spec, pos, vel, rng) if radar else _cartesian(spec, pos, rng))  # type: ignore[arg-type]
         n_false = rng.poisson(spec.clutter_per_scan) if spec.clutter_per_scan > 0 and region is not None else 0
         for _ in range(n_false):
             p = rng.uniform(region[:d, 0], region[:d, 1])  # type: ignore[index]
-            datas.append(_radar(spec, p, None, rng) if spec.kind == "radar" else _cartesian(spec, p, rng))
+            datas.append(_radar(spec, p, None, rng) if isinstance(spec, SimulatedRadar) else _cartesian(spec, p, rng))
         for data in datas:
             msg = m.Measurement(sensor_id=spec.id, t_ns=t, seq=seq, data=data)
             seq += 1

@@ -3,11 +3,11 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated, Literal
+from typing import Annotated
 
 import msgspec
 
-from fusion.config import ServiceConfig
+from fusion.config import CartesianSensorConfig, RadarSensorConfig, ServiceConfig
 from fusion.config_errors import convert, decode_toml
 from fusion.errors import ConfigError
 
@@ -29,28 +29,47 @@ class LatencySpec(Spec, kw_only=True):
     shape: Pos = 2.0
 
 
-class SensorSpec(Spec, kw_only=True):
-    """A simulated sensor. kind "cartesian": std_m per axis. kind "radar": range and bearing
-    (elevation in 3-D, range rate if range_rate) relative to position_m and heading_rad.
-    rate_hz None measures at every truth sample; otherwise at the samples closest to that rate."""
+class SimulatedCartesian(CartesianSensorConfig, tag="cartesian"):
+    """A simulated position sensor: the service's sensor configuration (id, pose, noise) plus
+    how it is simulated. rate_hz None measures at every truth sample; otherwise at the samples
+    closest to that rate."""
 
-    id: str
-    kind: Literal["cartesian", "radar"]
-    position_m: list[float] = []
-    heading_rad: float = 0.0
     rate_hz: Pos | None = None
-    std_m: list[Pos] = []
-    range_std_m: Pos = 1.0
-    bearing_std_rad: Pos = 0.01
-    elevation_std_rad: Pos = 0.01
-    range_rate: bool = False
-    range_rate_std_mps: Pos = 0.5
     latency: LatencySpec = LatencySpec()
     dropout: Prob = 0.0  # probability a message is lost on the way
     pd: Prob = 1.0  # detection probability
     clutter_per_scan: NonNeg = 0.0  # Poisson mean of false alarms per scan
-    clutter_region_m: list[float] = []  # [xmin, xmax, ymin, ymax(, zmin, zmax)]
+    clutter_region_m: list[float] = msgspec.field(default_factory=list)  # [xmin, xmax, ymin, ymax(, zmin, zmax)]
     duplicate: Prob = 0.0  # probability a message is sent twice
+
+    def __post_init__(self) -> None:
+        if self.std_m is None:
+            raise ValueError(f"simulated sensor {self.id}: std_m is needed to simulate its noise")
+
+
+class SimulatedRadar(RadarSensorConfig, tag="radar"):
+    """A simulated radar: the service's sensor configuration (id, pose, noise) plus how it is
+    simulated (as SimulatedCartesian; range_rate: whether returns carry a range rate)."""
+
+    rate_hz: Pos | None = None
+    range_rate: bool = False
+    latency: LatencySpec = LatencySpec()
+    dropout: Prob = 0.0
+    pd: Prob = 1.0
+    clutter_per_scan: NonNeg = 0.0
+    clutter_region_m: list[float] = msgspec.field(default_factory=list)
+    duplicate: Prob = 0.0
+
+    def __post_init__(self) -> None:
+        need = {"range_std_m": self.range_std_m, "bearing_std_rad": self.bearing_std_rad}
+        if self.range_rate:
+            need["range_rate_std_mps"] = self.range_rate_std_mps
+        missing = [k for k, v in need.items() if v is None]
+        if missing:
+            raise ValueError(f"simulated radar {self.id}: {', '.join(missing)} needed to simulate its noise")
+
+
+SensorSpec = SimulatedCartesian | SimulatedRadar
 
 
 class ScenarioSpec(Spec, kw_only=True):

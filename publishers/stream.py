@@ -14,7 +14,7 @@ import numpy as np
 from fusion import messages as m
 from fusion.scenarios import REFERENCE_NAMES, Reference
 from publishers.sensors import Emitted, _latency_ns, simulate_sensor
-from publishers.spec import LatencySpec, ScenarioSpec, SensorSpec
+from publishers.spec import LatencySpec, ScenarioSpec, SensorSpec, SimulatedCartesian, SimulatedRadar
 from publishers.truth import TargetTruth, load_reference, mix_truth
 
 
@@ -35,16 +35,16 @@ def reference_sensor(ref: Reference, spec: SensorSpec | None) -> SensorSpec:
         "duplicate": spec.duplicate if spec else 0.0,
     }
     if ref.sensor_kind == "radar":
-        return SensorSpec(id=spec.id if spec else "radar", kind="radar", range_std_m=float(std[0]),
-                          bearing_std_rad=float(std[1]), **common)  # type: ignore[arg-type]
-    return SensorSpec(id=spec.id if spec else "pos", kind="cartesian", std_m=std.tolist(), **common)  # type: ignore[arg-type]
+        return SimulatedRadar(id=spec.id if spec else "radar", range_std_m=float(std[0]),
+                              bearing_std_rad=float(std[1]), **common)  # type: ignore[arg-type]
+    return SimulatedCartesian(id=spec.id if spec else "pos", std_m=std.tolist(), **common)  # type: ignore[arg-type]
 
 
 def _reference_messages(ref: Reference, sensor: SensorSpec, rng: np.random.Generator) -> list[Emitted]:
     """The reference scenario's own measurements, with the sensor's latency and losses."""
     out = []
     for k, (t, z) in enumerate(zip(ref.t_ns.tolist(), ref.z, strict=True)):
-        if sensor.kind == "radar":
+        if isinstance(sensor, SimulatedRadar):
             data: m.Cartesian | m.Radar = m.Radar(
                 range_m=float(z[0]), bearing_rad=float(z[1]), range_std_m=sensor.range_std_m,
                 bearing_std_rad=sensor.bearing_std_rad)
@@ -91,6 +91,8 @@ def build_stream(spec: ScenarioSpec, *, namespace: str, t0_ns: int = 0) -> tuple
         msg = e.msg if t0_ns == 0 else m.Measurement(sensor_id=e.msg.sensor_id, t_ns=e.msg.t_ns + t0_ns,
                                                      seq=e.msg.seq, data=e.msg.data)
         samples.append(Sample(e.arrival_ns + t0_ns, m.meas_key(namespace, msg.sensor_id), m.encode(msg)))
+    if ref is not None and ref.u is not None:
+        samples.extend(_reference_inputs(ref, namespace, t0_ns, len(truths[0].t_ns)))
     for tr in truths:
         key = m.truth_key(namespace, tr.target_id)
         for t, x in zip(tr.t_ns.tolist(), tr.states, strict=True):
@@ -98,6 +100,21 @@ def build_stream(spec: ScenarioSpec, *, namespace: str, t0_ns: int = 0) -> tuple
             samples.append(Sample(int(t) + t0_ns, key, m.encode(msg)))
     samples.sort(key=lambda s: (s.arrival_ns, s.key, s.payload))
     return samples, truths
+
+
+CONTROL_SOURCE = "control"  # the source id of a reference scenario's known input (cv1d_d)
+
+
+def _reference_inputs(ref: Reference, namespace: str, t0_ns: int, n: int) -> list[Sample]:
+    """The reference scenario's known input: u[k] drives the step that ends at t_ns[k], so it is
+    published in force from the step's start (t_ns[k-1], or 0), on time."""
+    key = m.input_key(namespace, CONTROL_SOURCE)
+    out = []
+    for k in range(n):
+        t = (0 if k == 0 else int(ref.t_ns[k - 1])) + t0_ns
+        msg = m.Input(source_id=CONTROL_SOURCE, t_ns=t, seq=k, u=[float(v) for v in ref.u[k]])  # type: ignore[index]
+        out.append(Sample(t, key, m.encode(msg)))
+    return out
 
 
 def _stable(s: str) -> int:

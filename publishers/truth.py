@@ -79,11 +79,15 @@ def reference_truth(ref: Reference) -> TargetTruth:
     names = tuple(_LAYOUTS.get(n, n) for n in ref.layout)
     X = ref.truth
     if ref.name.startswith("helix3d"):
-        # x-y rotate at omega (0.1 rad/s in the documented truth): vx = -omega y, vy = omega x
+        # x-y rotate at omega (0.1 rad/s in the documented truth): vx = -omega y, vy = omega x;
+        # the reference's own components (omega; the document's w and a) are kept too, so a
+        # tracker in the reference's state space is scored as well as a constant-velocity one
         omega = X[:, 3] if ref.name == "helix3d_ekf" else np.full(len(X), 0.1)
         vz = X[:, 4] if ref.name == "helix3d_ekf" else np.full(len(X), 0.5)
-        X = np.column_stack([X[:, 0], -omega * X[:, 1], X[:, 1], omega * X[:, 0], X[:, 2], vz])
-        names = ("x", "vx", "y", "vy", "z", "vz")
+        cv = np.column_stack([X[:, 0], -omega * X[:, 1], X[:, 1], omega * X[:, 0], X[:, 2], vz])
+        extra = [i for i, n in enumerate(ref.layout) if n not in ("x", "y", "z", "vz")]
+        X = np.column_stack([cv, X[:, extra]])
+        names = ("x", "vx", "y", "vy", "z", "vz", *(ref.layout[i] for i in extra))
     return TargetTruth("target0", ref.t_ns.astype(np.int64), X, names)
 
 

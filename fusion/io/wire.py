@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 
 from fusion import messages as m
-from fusion.tracking.detection import Detection
+from fusion.tracking.detection import ControlInput, Detection
 from fusion.tracking.results import Estimate
 
 STREAM_SUFFIX = ".fstream"
@@ -19,6 +19,7 @@ snapshot_key = m.snapshot_key
 track_key = m.track_key
 all_measurements_key = m.all_meas_key
 all_truth_key = m.all_truth_key
+all_input_key = m.all_input_key
 
 
 def is_measurement_key(key: str) -> bool:
@@ -26,26 +27,29 @@ def is_measurement_key(key: str) -> bool:
 
 
 def detection_of(msg: m.Measurement, arrival_ns: int | None = None) -> Detection:
-    """The tracker's view of a wire measurement: z and R in the sensor's measurement space."""
+    """The tracker's view of a wire measurement: z and R in the sensor's measurement space (R None
+    when the message carries no noise: the tracker then takes the sensor's configured one)."""
     d = msg.data
+    R: np.ndarray | None = None
     if isinstance(d, m.Cartesian):
         z = np.array(d.pos_m, dtype=np.float64)
         k = z.shape[0]
         if d.std_m is not None:
             R = np.diag(np.square(np.array(d.std_m, dtype=np.float64)))
-        else:
+        elif d.cov_m2 is not None:
             R = np.array(d.cov_m2, dtype=np.float64).reshape(k, k)
     else:
         vals = [d.range_m, d.bearing_rad]
-        var = [d.range_std_m**2, d.bearing_std_rad**2]
+        var = [d.range_std_m, d.bearing_std_rad]
         if d.elevation_rad is not None:
             vals.append(d.elevation_rad)
-            var.append(d.elevation_std_rad**2)  # type: ignore[operator]
+            var.append(d.elevation_std_rad)
         if d.range_rate_mps is not None:
             vals.append(d.range_rate_mps)
-            var.append(d.range_rate_std_mps**2)  # type: ignore[operator]
+            var.append(d.range_rate_std_mps)
         z = np.array(vals, dtype=np.float64)
-        R = np.diag(var)
+        if d.has_noise:
+            R = np.diag(np.square(np.array(var, dtype=np.float64)))
     return Detection(msg.sensor_id, msg.t_ns, msg.seq, z, R, arrival_ns)
 
 
@@ -64,6 +68,10 @@ class Codec:
     def detection(self, payload: bytes, arrival_ns: int | None = None) -> Detection:
         """Raises MalformedMessageError or InvalidMessageError (fusion.errors) for bad bytes."""
         return detection_of(m.decode_measurement(payload), arrival_ns)
+
+    def control(self, payload: bytes, arrival_ns: int | None = None) -> ControlInput:
+        msg = m.decode_input(payload)
+        return ControlInput(msg.source_id, msg.t_ns, msg.seq, np.array(msg.u, dtype=np.float64), arrival_ns)
 
     def truth(self, payload: bytes, layout: tuple[str, ...]) -> tuple[str, int, np.ndarray] | None:
         return truth_in_layout(m.decode_truth(payload), layout)

@@ -1,4 +1,4 @@
-"""What the tracker takes in (a Detection) and the reasons it refuses one."""
+"""What the tracker takes in (a Detection, a ControlInput) and the reasons it refuses one."""
 
 from __future__ import annotations
 
@@ -17,6 +17,7 @@ class Reason(StrEnum):
     INVALID = "invalid"  # wrong dimension, NaN/inf, bad sequence number or time
     BAD_COVARIANCE = "bad_covariance"  # a noise covariance that is not symmetric positive definite
     UNKNOWN_SENSOR = "unknown_sensor"
+    UNSUPPORTED_VERSION = "unsupported_version"  # a message of a schema version this build does not read
     KEY_MISMATCH = "key_mismatch"  # a sample whose payload names another sensor (or target) than its key
     DUPLICATE = "duplicate"  # same (sensor_id, seq) seen before
     TOO_LATE = "too_late"  # older than the out-of-order window
@@ -52,6 +53,23 @@ class Detection:
             sensor_id, int(t_ns), int(seq), np.asarray(z, dtype=np.float64),
             None if R is None else np.asarray(R, dtype=np.float64), None if arrival_ns is None else int(arrival_ns),
         )
+
+
+@dataclass(frozen=True, slots=True)
+class ControlInput:
+    """A known input u (e.g. an acceleration per axis) from source `source_id`, in force from
+    t_ns until the source's next input (zero-order hold); before the first one u = 0."""
+
+    source_id: str
+    t_ns: int
+    seq: int
+    u: Array
+    arrival_ns: int | None = None
+
+    @classmethod
+    def of(cls, source_id: str, t_ns: int, seq: int, u: object, arrival_ns: int | None = None) -> ControlInput:
+        return cls(source_id, int(t_ns), int(seq), np.atleast_1d(np.asarray(u, dtype=np.float64)),
+                   None if arrival_ns is None else int(arrival_ns))
 
 
 @dataclass(frozen=True, slots=True)

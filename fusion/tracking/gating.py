@@ -34,6 +34,7 @@ from fusion.core.imm_stack import StackPrediction, predict_imm, stackable, updat
 from fusion.core.kalman import ExtendedKalmanFilter
 from fusion.core.measurement import MeasurementModel
 from fusion.errors import NumericalError
+from fusion.tracking.controls import InputTimeline
 from fusion.tracking.trackset import TrackSet
 
 LOG_2PI = math.log(2.0 * math.pi)
@@ -127,14 +128,15 @@ class Gater(Protocol):
     def gate(self, ts: TrackSet, t_ns: int, ci: np.ndarray, cj: np.ndarray, meas: Measured) -> Gated: ...
 
 
-def make_gater(filt: Filter, thresholds: dict[int, float]) -> Gater:
+def make_gater(filt: Filter, thresholds: dict[int, float], inputs: InputTimeline | None = None) -> Gater:
     """The batched gate where the filter and its motion models allow it, else pair by pair.
-    (A measurement model that takes one state at a time falls back to pairs within a scan.)"""
+    (A measurement model that takes one state at a time falls back to pairs within a scan.)
+    Known control inputs add their offset to every prediction (fusion.tracking.controls)."""
     if isinstance(filt, ExtendedKalmanFilter) and filt.motion.broadcasts:
-        return BatchedGate(filt, thresholds)
-    if isinstance(filt, IMM) and stackable(filt):
+        return BatchedGate(filt, thresholds, inputs)
+    if isinstance(filt, IMM) and stackable(filt) and inputs is None:
         return BatchedIMMGate(filt, thresholds)
-    return PerPairGate(filt, thresholds)
+    return PerPairGate(filt, thresholds, inputs)
 
 
 class _Kept:
@@ -176,9 +178,15 @@ class _Kept:
 class PerPairGate:
     """One filter call per track (predict) and per pair (update); any filter."""
 
-    def __init__(self, filt: Filter, thresholds: dict[int, float]) -> None:
+    def __init__(self, filt: Filter, thresholds: dict[int, float], inputs: InputTimeline | None = None) -> None:
         self.filter = filt
         self.g = thresholds
+        self.inputs = inputs
+
+    def _predict(self, state: GaussianState, t_ns: int) -> GaussianState:
+        pred = self.filter.predict(state, t_ns)  # type: ignore[arg-type]
+        d = None if self.inputs is None else self.inputs.offset(state.t_ns, t_ns)
+        return pred if d is None else GaussianState(pred.x + d, pred.P, t_ns)
 
     def gate(self, ts: TrackSet, t_ns: int, ci: np.ndarray, cj: np.ndarray, meas: Measured) -> Gated:
         preds: dict[int, GaussianState | IMMState] = {}
@@ -186,7 +194,7 @@ class PerPairGate:
         for i, j in zip(ci.tolist(), cj.tolist(), strict=True):
             pred = preds.get(i)
             if pred is None:
-                pred = preds[i] = self.filter.predict(ts.state(i), t_ns)  # type: ignore[arg-type]
+                pred = preds[i] = self._predict(ts.state(i), t_ns)  # type: ignore[arg-type]
             model = meas.models[j]
             try:
                 up: Update = self.filter.update(pred, meas.z[j], model, R=meas.R[j])  # type: ignore[arg-type]
@@ -210,10 +218,11 @@ class _Batched(ABC):
     candidate pairs by measurement dimension, run the stacked update per group, keep the pairs
     inside the gate."""
 
-    def __init__(self, filt: Filter, thresholds: dict[int, float]) -> None:
+    def __init__(self, filt: Filter, thresholds: dict[int, float], inputs: InputTimeline | None = None) -> None:
         self.filter = filt
         self.g = thresholds
-        self._each = PerPairGate(filt, thresholds)
+        self.inputs = inputs
+        self._each = PerPairGate(filt, thresholds, inputs)
 
     @abstractmethod
     def _predict(self, ts: TrackSet, t_ns: int, tracks: np.ndarray) -> object:
@@ -257,7 +266,15 @@ class BatchedGate(_Batched):
         X, P = ts.X[tracks], ts.P[tracks]
         dt = (t_ns - ts.t_ns[tracks]) * 1e-9
         Xp, Pp = predict_stack(X, P, m.jacobian(X, dt), m.Q(X, dt))
-        return (Xp if m.is_linear else m.f(X, dt)), Pp
+        if not m.is_linear:
+            Xp = m.f(X, dt)
+        if self.inputs is not None:
+            t0 = ts.t_ns[tracks]
+            for t in np.unique(t0).tolist():
+                d = self.inputs.offset(t, t_ns)
+                if d is not None:
+                    Xp[t0 == t] += d
+        return Xp, Pp
 
     def _update(self, pred: object, rows: np.ndarray, Z: Array, R: Array, model: MeasurementModel
                 ) -> tuple[Array, Part]:

@@ -56,9 +56,11 @@ class History:
     def __len__(self) -> int:
         return len(self.entries)
 
-    def rewind(self, new_keys: set[ScanKey], current: TrackSet) -> Rewind:
-        """Remove the entries from the earliest scan that new data touches, and say what to run."""
-        start = min(bisect.bisect_left(self.keys, k) for k in new_keys)
+    def rewind(self, new_keys: set[ScanKey], current: TrackSet, *, touched: set[ScanKey] | None = None) -> Rewind:
+        """Remove the entries from the earliest scan that new data touches (new scans, and
+        `touched`: times whose later scans must run again, e.g. a control input's), and say
+        what to run."""
+        start = min(bisect.bisect_left(self.keys, k) for k in new_keys | (touched or set()))
         old = self.entries[start:]
         keys = sorted(set(self.keys[start:]) | new_keys)
         ts = old[0].before if old else current

@@ -30,7 +30,7 @@ from fusion.config import TimeConfig
 from fusion.core.checks import as_covariance
 from fusion.core.timebase import NS_PER_S
 from fusion.errors import InputError
-from fusion.tracking.detection import Detection, Reason, Refusal
+from fusion.tracking.detection import ControlInput, Detection, Reason, Refusal
 from fusion.tracking.models import SensorModel
 from fusion.tracking.results import ScanKey
 
@@ -67,8 +67,11 @@ class StreamClock:
 class Intake:
     """Validation, the clock, the window and the duplicate set of one tracker."""
 
-    def __init__(self, sensors: Mapping[str, SensorModel], cfg: TimeConfig) -> None:
+    def __init__(self, sensors: Mapping[str, SensorModel], cfg: TimeConfig, *, control_source: str | None = None,
+                 control_dim: int = 0) -> None:
         self.sensors = sensors
+        self.control_source = control_source
+        self.control_dim = control_dim
         self.clock = StreamClock(cfg.clock_samples, cfg.clock_outliers)
         self.lag_ns = round(cfg.lag_s * NS_PER_S)
         self.future_ns = round(cfg.future_s * NS_PER_S)
@@ -81,35 +84,58 @@ class Intake:
         """The detection to track (its R filled in from the sensor's default when absent), or
         the reason it is refused. An accepted detection is remembered for duplicates."""
         d, bad = self.validate(d)
-        if bad is not None:
-            return None, bad
-        if d.arrival_ns is None:  # no other clock: the data's own times, k + 1 that agree move it
-            now = self.now_ns = self.clock.observe(d.t_ns, None)
-        else:  # a detection judged future does not count towards the clock
-            now = self.now_ns = self.clock.now(d.arrival_ns)
-            if now is None or d.t_ns <= now + self.future_ns:
-                now = self.now_ns = self.clock.observe(d.t_ns, d.arrival_ns)
-        if d.t_ns > now + self.future_ns:
-            return None, _no(d, Reason.FUTURE, f"{(d.t_ns - now) / 1e9:.3f} s ahead of the stream's clock")
+        if bad is None:
+            bad = self._window(d.sensor_id, d.t_ns, d.seq, d.arrival_ns)
+        return (None, bad) if bad is not None else (d, None)
+
+    def admit_input(self, c: ControlInput) -> tuple[ControlInput | None, Refusal | None]:
+        """A control input, or the reason it is refused (the same window and duplicates)."""
+        bad = None
+        if c.source_id != self.control_source:
+            bad = _no(c, Reason.UNKNOWN_SENSOR, f"input source {c.source_id!r} is not configured")
+        elif c.u.shape != (self.control_dim,) or not np.isfinite(c.u).all():
+            bad = _no(c, Reason.INVALID, f"u must be {self.control_dim} finite values, got shape {c.u.shape}")
+        elif not isinstance(c.seq, int) or c.seq < 0:
+            bad = _no(c, Reason.INVALID, "seq must be an integer >= 0")
+        if bad is None:
+            bad = self._window(c.source_id, c.t_ns, c.seq, c.arrival_ns)
+        return (None, bad) if bad is not None else (c, None)
+
+    def _window(self, source: str, t_ns: int, seq: int, arrival_ns: int | None) -> Refusal | None:
+        """The clock, the window and the duplicate set (see the module docstring)."""
+        if arrival_ns is None:  # no other clock: the data's own times, k + 1 that agree move it
+            now = self.now_ns = self.clock.observe(t_ns, None)
+        else:  # data judged future does not count towards the clock
+            now = self.now_ns = self.clock.now(arrival_ns)
+            if now is None or t_ns <= now + self.future_ns:
+                now = self.now_ns = self.clock.observe(t_ns, arrival_ns)
+        if t_ns > now + self.future_ns:
+            return Refusal(source, t_ns, seq, Reason.FUTURE, f"{(t_ns - now) / 1e9:.3f} s ahead of the stream's clock")
         h = now - self.lag_ns
         if self.horizon_ns is None or h > self.horizon_ns:
             self.horizon_ns = h
-        if d.t_ns < self.horizon_ns:
-            return None, _no(d, Reason.TOO_LATE, f"{(self.horizon_ns - d.t_ns) / 1e9:.3f} s before the "
-                             "out-of-order window")
-        if self.committed is not None and (d.t_ns, d.sensor_id) <= self.committed:
-            return None, _no(d, Reason.TOO_LATE, "before a scan the history committed early (max_lag_scans)")
-        ident = (d.sensor_id, d.seq, d.t_ns)
+        if t_ns < self.horizon_ns:
+            return Refusal(source, t_ns, seq, Reason.TOO_LATE,
+                           f"{(self.horizon_ns - t_ns) / 1e9:.3f} s before the out-of-order window")
+        if self.committed is not None and (t_ns, source) <= self.committed:
+            return Refusal(source, t_ns, seq, Reason.TOO_LATE,
+                           "before a scan the history committed early (max_lag_scans)")
+        ident = (source, seq, t_ns)
         if ident in self._seen:
-            return None, _no(d, Reason.DUPLICATE, f"seq {d.seq} of {d.sensor_id} at this time seen before")
+            return Refusal(source, t_ns, seq, Reason.DUPLICATE, f"seq {seq} of {source} at this time seen before")
         self._seen.add(ident)
-        return d, None
+        return None
 
     def forget(self, dets: tuple[Detection, ...]) -> None:
         """Detections of committed scans: nothing before the horizon is admitted, so their
         identities need not be kept."""
         for d in dets:
             self._seen.discard((d.sensor_id, d.seq, d.t_ns))
+
+    def forget_inputs(self, inputs: list[tuple[int, int]]) -> None:
+        """(t_ns, seq) of committed control inputs."""
+        for t, seq in inputs:
+            self._seen.discard((self.control_source, seq, t))
 
     def commit(self, key: ScanKey) -> None:
         if self.committed is None or key > self.committed:
@@ -164,5 +190,5 @@ def _positive_diagonal(R: np.ndarray, m: int) -> bool:
     return True
 
 
-def _no(d: Detection, reason: Reason, detail: str) -> Refusal:
-    return Refusal(d.sensor_id, d.t_ns, d.seq, reason, detail)
+def _no(d: Detection | ControlInput, reason: Reason, detail: str) -> Refusal:
+    return Refusal(d.sensor_id if isinstance(d, Detection) else d.source_id, d.t_ns, d.seq, reason, detail)

@@ -21,6 +21,8 @@ from fusion.core.measurement import CartesianPosition, MeasurementModel, Radar2D
 from fusion.core.modes import Mode, build_imm, mode_motion
 from fusion.core.motion import ConstantAcceleration, ConstantVelocity, CoordinatedTurn, MotionModel
 from fusion.core.ukf import UnscentedKalmanFilter
+from fusion.errors import ConfigError
+from fusion.models.loader import load_model
 
 AXES = ("x", "y", "z")
 
@@ -30,14 +32,24 @@ def _q(psd: float) -> float:
     return math.sqrt(psd)
 
 
-def motion_model(cfg: MotionConfig) -> MotionModel:
-    """The motion model of a single-model tracker (the state space of an IMM's modes)."""
+def motion_model(cfg: MotionConfig, *, control: bool = False) -> MotionModel:
+    """The motion model of a single-model tracker (the state space of an IMM's modes); with
+    `control` the constant-velocity model takes an acceleration input."""
     if cfg.model == "cv":
-        return ConstantVelocity(ndim=cfg.ndim, q=_q(cfg.accel_psd_m2s3))
+        return ConstantVelocity(ndim=cfg.ndim, q=_q(cfg.accel_psd_m2s3), with_control=control)
     if cfg.model == "ca":
         return ConstantAcceleration(ndim=cfg.ndim, q=_q(cfg.accel_psd_m2s3))
     if cfg.model == "ct":
         return CoordinatedTurn(q_accel=_q(cfg.accel_psd_m2s3), q_turn=_q(cfg.turn_psd_rad2s3))
+    if cfg.model == "custom":
+        model = load_model(cfg.custom, cfg.params)
+        if not isinstance(model, MotionModel):
+            raise ConfigError(f"motion model {cfg.custom}: a MotionModel is needed (fusion.core.motion), "
+                              f"got {type(model).__name__}")
+        if len(model.position_indices) != cfg.ndim:
+            raise ConfigError(f"motion model {cfg.custom} has a {len(model.position_indices)}-D position; "
+                              f"set motion.ndim = {len(model.position_indices)}")
+        return model
     modes = imm_modes(cfg)  # an IMM: the first mode's model, in the state space they share
     return mode_motion(modes[0], ndim=cfg.ndim, turn_state=any(m.kind == "ct" for m in modes))
 
@@ -47,19 +59,25 @@ def imm_modes(cfg: MotionConfig) -> list[Mode]:
             for m in cfg.modes]
 
 
-def layout(cfg: MotionConfig) -> tuple[str, ...]:
+def layout(cfg: MotionConfig, motion: MotionModel) -> tuple[str, ...]:
     """Names of the state components, in order."""
+    if cfg.model == "custom":
+        names = tuple(cfg.state_names) or tuple(getattr(motion, "state_names", ()))
+        n = motion.ndim_state
+        if names and len(names) != n:
+            raise ConfigError(f"motion.state_names names {len(names)} components; the model has {n}")
+        return names or tuple(f"s{i}" for i in range(n))
     if cfg.model == "ct" or (cfg.model == "imm" and any(m.model == "ct" for m in cfg.modes)):
         return ("x", "vx", "y", "vy", "omega")
     per = ("", "v", "a") if cfg.model == "ca" else ("", "v")
     return tuple(p + a for a in AXES[: cfg.ndim] for p in per)
 
 
-def make_filter(cfg: MotionConfig) -> Filter:
-    """The track filter. Inputs are validated at intake, so the filters skip their checks."""
+def make_filter(cfg: MotionConfig, m: MotionModel) -> Filter:
+    """The track filter over motion model `m` (an IMM builds its modes' own). Inputs are
+    validated at intake, so the filters skip their checks."""
     if cfg.model == "imm":
         return build_imm(imm_modes(cfg), ndim=cfg.ndim, filter=cfg.filter, check=False)
-    m = motion_model(cfg)
     if cfg.filter == "ukf":
         return UnscentedKalmanFilter(m, check=False)
     return ExtendedKalmanFilter(m, check=False)
@@ -156,7 +174,16 @@ def sensor_models(cfg: TrackerConfig, motion: MotionModel) -> dict[str, SensorMo
 
 
 def initial_covariance_diag(cfg: TrackerConfig, n: int, motion: MotionModel) -> Array:
-    """Prior variances of the unmeasured components (velocity, acceleration, turn rate)."""
+    """Prior variances of the unmeasured components (velocity, acceleration, turn rate; or
+    init.state_std)."""
+    if cfg.init.state_std:
+        if len(cfg.init.state_std) != n:
+            raise ConfigError(f"init.state_std has {len(cfg.init.state_std)} values; the state has {n}")
+        return np.square(np.asarray(cfg.init.state_std, dtype=np.float64))
+    named = set(motion.position_indices) | set(motion.velocity_indices)
+    if cfg.motion.model == "custom" and len(named) < n:
+        raise ConfigError(f"init.state_std is needed: the custom model's components {sorted(set(range(n)) - named)} "
+                          "are neither position nor velocity")
     diag = np.zeros(n)
     diag[list(motion.velocity_indices)] = cfg.init.velocity_std_mps**2
     if cfg.motion.model == "ca":

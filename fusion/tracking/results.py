@@ -146,8 +146,9 @@ class Replay:
 class Counts:
     """Cumulative counts of a tracker.
 
-    Intake: received = applied + truth + sum(refused.values()) (duplicates are refused with
-    reason "duplicate"; truth samples are counted by the pipeline, 0 in a bare tracker).
+    Intake: received = applied + inputs + truth + sum(refused.values()) (applied: measurements;
+    inputs: control inputs; duplicates are refused with reason "duplicate"; truth samples are
+    counted by the pipeline, 0 in a bare tracker).
     What the data did (a function of the accepted measurements, whatever their arrival order):
     updates, births, births_refused_capacity, unassigned, confirmations, deletions by reason,
     numerical_skips. How the data arrived: replays (calls that rewound), replayed_scans (scans
@@ -158,6 +159,7 @@ class Counts:
     received: int = 0
     applied: int = 0
     truth: int = 0
+    inputs: int = 0
     refused: Mapping[Reason, int] = field(default_factory=dict)
     updates: int = 0
     births: int = 0
@@ -177,7 +179,7 @@ class Counts:
 
     def flat(self) -> dict[str, int]:
         """Every count under a path-like name ("refused/duplicate", "deletions/misses"), sorted."""
-        out = {k: getattr(self, k) for k in ("received", "applied", "truth", "updates", "births",
+        out = {k: getattr(self, k) for k in ("received", "applied", "inputs", "truth", "updates", "births",
                                              "births_refused_capacity", "unassigned", "confirmations",
                                              "numerical_skips", "replays", "replayed_scans", "rescans", "late_applied")}
         out.update({f"refused/{r.value}": n for r, n in self.refused.items()})

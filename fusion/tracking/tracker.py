@@ -23,7 +23,8 @@ from scipy.special import chdtri
 
 from fusion.config import TrackerConfig
 from fusion.errors import ConfigError
-from fusion.tracking.detection import Detection, Reason, Refusal
+from fusion.tracking.controls import InputTimeline
+from fusion.tracking.detection import ControlInput, Detection, Reason, Refusal
 from fusion.tracking.gating import make_gater
 from fusion.tracking.history import Entry, History, Rewind, revise, revise_events
 from fusion.tracking.intake import Intake
@@ -50,9 +51,11 @@ class Tracker:
         if not config.sensors:
             raise ConfigError("a tracker needs at least one sensor")
         self.config = config
-        self.motion = motion_model(config.motion)
-        self.filter = make_filter(config.motion)
-        self.layout = layout(config.motion)
+        control = config.control is not None
+        self.motion = motion_model(config.motion, control=control)
+        self.filter = make_filter(config.motion, self.motion)
+        self.inputs = InputTimeline(self.motion, config.motion.ndim) if control else None  # type: ignore[arg-type]
+        self.layout = layout(config.motion, self.motion)
         self.model_name = config.motion.model
         self.sensors = sensor_models(config, self.motion)
         self.position_indices = tuple(self.motion.position_indices)
@@ -60,17 +63,18 @@ class Tracker:
         gate = {m: float(chdtri(m, 1.0 - config.gate.probability)) for m in range(1, 7)}
         q2 = max([config.motion.accel_psd_m2s3] + [m.accel_psd_m2s3 for m in config.motion.modes])
         self.ctx = ScanContext(
-            sensors=self.sensors, filter=self.filter, gater=make_gater(self.filter, gate),
+            sensors=self.sensors, filter=self.filter, gater=make_gater(self.filter, gate, self.inputs),
             lifecycle=Lifecycle(config.lifecycle, q2),
             init_diag=initial_covariance_diag(config, self.motion.ndim_state, self.motion),
             pos_idx=self.position_indices, coarse_k=config.gate.coarse_margin * float(np.sqrt(max(gate.values()))),
             q2=q2, max_tracks=config.lifecycle.max_tracks,
         )
-        self.intake = Intake(self.sensors, config.time)
+        source = config.control.source_id if config.control is not None else None
+        self.intake = Intake(self.sensors, config.time, control_source=source, control_dim=config.motion.ndim)
         self.history = History()
         self._ts = TrackSet.start(Layout(self.position_indices, self.velocity_indices, tuple(sorted(self.sensors)),
                                          self.motion.ndim_state, len(getattr(self.filter, "filters", ()))))
-        self._intake_counts = {"received": 0, "applied": 0}
+        self._intake_counts = {"received": 0, "applied": 0, "inputs": 0}
         self._refused: dict[Reason, int] = {}
         self._arrival = {"replays": 0, "replayed_scans": 0, "rescans": 0, "late_applied": 0}
 
@@ -103,6 +107,7 @@ class Tracker:
         t = self.history.tally()
         return Counts(
             received=self._intake_counts["received"], applied=self._intake_counts["applied"],
+            inputs=self._intake_counts["inputs"],
             refused=dict(sorted(self._refused.items())), updates=t[Tally.UPDATES], births=t[Tally.BIRTHS],
             births_refused_capacity=t[Tally.BIRTHS_REFUSED_CAPACITY], unassigned=t[Tally.UNASSIGNED],
             confirmations=t[Tally.CONFIRMATIONS], numerical_skips=t[Tally.NUMERICAL_SKIPS],
@@ -110,17 +115,20 @@ class Tracker:
         )
 
     # ---- the algorithm ----------------------------------------------------------------------
-    def process(self, detections: Iterable[Detection]) -> StepResult:
-        """Take measurements (any order, any mix of sensors); return what changed."""
-        accepted, refused = self._admit(detections)
-        if not accepted:
+    def process(self, items: Iterable[Detection | ControlInput]) -> StepResult:
+        """Take measurements and control inputs (any order, any mix of sensors); return what
+        changed."""
+        accepted, inputs, refused = self._admit(items)
+        if not accepted and not inputs:
             return StepResult((), (), tuple(refused), 0, (), ())
         scans: dict[ScanKey, list[Detection]] = {}
         for d in accepted:
             scans.setdefault((d.t_ns, d.sensor_id), []).append(d)
+        for c in inputs:
+            self.inputs.add(c.t_ns, c.seq, c.u)  # type: ignore[union-attr]
         newest = self.history.newest
-        rw = self.history.rewind(set(scans), self._ts)
-        replays = self._count_arrival(accepted, newest, rw)
+        rw = self.history.rewind(set(scans), self._ts, touched={(c.t_ns, c.source_id) for c in inputs})
+        replays = self._count_arrival(accepted, inputs, newest, rw)
 
         estimates: list[Estimate] = []
         events: list[TrackEvent] = []
@@ -145,22 +153,32 @@ class Tracker:
         return StepResult(tuple(estimates), tuple(events), tuple(refused), len(accepted), replays, tuple(assoc),
                           tuple(points))
 
-    def _admit(self, detections: Iterable[Detection]) -> tuple[list[Detection], list[Refusal]]:
+    def _admit(self, items: Iterable[Detection | ControlInput]
+               ) -> tuple[list[Detection], list[ControlInput], list[Refusal]]:
         accepted: list[Detection] = []
+        inputs: list[ControlInput] = []
         refused: list[Refusal] = []
-        for d in detections:
+        for d in items:
             self._intake_counts["received"] += 1
-            ok, bad = self.intake.admit(d)
+            if isinstance(d, ControlInput):
+                c, bad = self.intake.admit_input(d)
+                if c is not None:
+                    inputs.append(c)
+            else:
+                ok, bad = self.intake.admit(d)
+                if ok is not None:
+                    accepted.append(ok)
             if bad is not None:
                 refused.append(bad)
                 self._refused[bad.reason] = self._refused.get(bad.reason, 0) + 1
-            else:
-                accepted.append(ok)  # type: ignore[arg-type]
         self._intake_counts["applied"] += len(accepted)
-        return accepted, refused
+        self._intake_counts["inputs"] += len(inputs)
+        return accepted, inputs, refused
 
-    def _count_arrival(self, accepted: list[Detection], newest: ScanKey | None, rw: Rewind) -> tuple[Replay, ...]:
-        late = sorted((d.sensor_id, d.seq) for d in accepted if newest is not None and (d.t_ns, d.sensor_id) < newest)
+    def _count_arrival(self, accepted: list[Detection], inputs: list[ControlInput], newest: ScanKey | None,
+                       rw: Rewind) -> tuple[Replay, ...]:
+        late = sorted([(d.sensor_id, d.seq) for d in accepted if newest is not None and (d.t_ns, d.sensor_id) < newest]
+                      + [(c.source_id, c.seq) for c in inputs if newest is not None and (c.t_ns, c.source_id) < newest])
         if late:  # a true replay: scans before the newest one are run again
             self._arrival["replays"] += 1
             self._arrival["replayed_scans"] += len(rw.old)
@@ -178,3 +196,5 @@ class Tracker:
             self.intake.forget(e.dets)
         if gone:
             self.intake.commit(gone[-1].key)
+        if self.inputs is not None and h is not None:
+            self.intake.forget_inputs(self.inputs.forget_before(h))

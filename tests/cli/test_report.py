@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import pytest
-
 from fusion import messages as m
 from fusion.cli.report import counts_line, flat_counts, format_status, format_tracks
 

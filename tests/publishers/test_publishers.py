@@ -14,7 +14,14 @@ import pytest
 from fusion import messages as m
 from fusion.scenarios import REFERENCE_NAMES
 from publishers.publish import publish
-from publishers.spec import LatencySpec, ScenarioSpec, SensorSpec, load_scenario_file, scenario_path
+from publishers.spec import (
+    LatencySpec,
+    ScenarioSpec,
+    SimulatedCartesian,
+    SimulatedRadar,
+    load_scenario_file,
+    scenario_path,
+)
 from publishers.stream import build_stream
 
 
@@ -43,8 +50,8 @@ def test_same_seed_gives_byte_identical_streams() -> None:
 
 
 def _mix(jitter_ms: float) -> ScenarioSpec:
-    s = SensorSpec(id="r", kind="radar", position_m=[0.0, 0.0], rate_hz=10.0,
-                   latency=LatencySpec(base_ms=10.0, jitter_ms=jitter_ms))
+    s = SimulatedRadar(id="r", position_m=[0.0, 0.0], rate_hz=10.0, range_std_m=1.0, bearing_std_rad=0.01,
+                       latency=LatencySpec(base_ms=10.0, jitter_ms=jitter_ms))
     return ScenarioSpec(source="mix", seed=3, targets=4, duration_s=10.0, sensors=[s])
 
 
@@ -60,8 +67,8 @@ def test_jitter_and_only_jitter_reorders(jitter_ms: float) -> None:
 
 
 def test_sensor_effects_are_seen() -> None:
-    s = SensorSpec(id="c", kind="cartesian", std_m=[1.0, 1.0], pd=0.8, clutter_per_scan=3.0,
-                   clutter_region_m=[-100.0, 100.0, -100.0, 100.0], dropout=0.1, duplicate=0.1)
+    s = SimulatedCartesian(id="c", std_m=[1.0, 1.0], pd=0.8, clutter_per_scan=3.0,
+                           clutter_region_m=[-100.0, 100.0, -100.0, 100.0], dropout=0.1, duplicate=0.1)
     spec = ScenarioSpec(source="mix", seed=5, targets=3, duration_s=20.0, sensors=[s])
     meas = _meas(build_stream(spec, namespace="t")[0])
     per_scan = Counter(x.t_ns for x in meas)

@@ -94,6 +94,31 @@ def test_reference_scenario_end_to_end(name: str, tmp_path: Path) -> None:
     assert v.returncode == 0, v.stderr
 
 
+@pytest.mark.parametrize("name", ["cv1d_d", "helix3d_ekf", "helix3d_ekf_doc"], ids=str)
+def test_the_service_tracks_as_well_as_the_reference_filter(name: str, tmp_path: Path) -> None:
+    """Through the real service path: cv1d_d with its control input on the wire, the helix
+    scenarios with the source document's 5-state models loaded by import path. Position RMSE
+    within 10 % of the offline reference filter (fusion.scenarios.run_reference)."""
+    from fusion.scenarios import reference, run_reference
+
+    spec, _ = scenario_config(name)
+    _, samples, _, got, svc = _run_live(name, tmp_path)
+    if name == "cv1d_d":
+        assert svc.status_dict()["counts"]["applied"] == 100 and svc.tracker.counts.inputs == 100
+    ref = reference(name, seed=spec.seed)
+    est = {e.t_ns: e.state for e in latest(got).values() if e.status == "confirmed"}
+    d = len(ref.meas.indices)  # type: ignore[attr-defined]
+    idx = list(range(d)) if name != "cv1d_d" else [0]
+    rows = [(k, est[int(t)]) for k, t in enumerate(ref.t_ns) if int(t) in est]
+    assert len(rows) > 0.9 * ref.n_steps
+    err = np.array([np.asarray(x)[idx] - ref.truth[k, idx] for k, x in rows])
+    rmse = float(np.sqrt(np.mean(np.sum(err**2, axis=1))))
+    off = run_reference(ref)
+    ks = [k for k, _ in rows]
+    rmse_ref = float(np.sqrt(np.mean(np.sum((off.x[ks][:, idx] - ref.truth[ks][:, idx]) ** 2, axis=1))))
+    assert rmse < 1.1 * rmse_ref, (rmse, rmse_ref)
+
+
 def _rrd_rows(path: Path) -> dict[str, int]:
     from collections import Counter
 

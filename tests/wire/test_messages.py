@@ -53,14 +53,16 @@ BAD = {
     "zero-range": (_json(RADAR.format(r=0, b=0.1, s=1)), "range_m"),
     "dimension": (_json('{"type":"cartesian","pos_m":[1,2],"std_m":[1]}'), "std_m must have 2"),
     "cov-dimension": (_json('{"type":"cartesian","pos_m":[1,2],"cov_m2":[1,0,1]}'), "cov_m2 must have 4"),
-    "both-noises": (_json('{"type":"cartesian","pos_m":[1,2],"std_m":[1,1],"cov_m2":[1,0,0,1]}'), "exactly one"),
+    "both-noises": (_json('{"type":"cartesian","pos_m":[1,2],"std_m":[1,1],"cov_m2":[1,0,0,1]}'), "at most one"),
     "unknown-field": (_json(RADAR.format(r=10, b=0.1, s=1), extra=',"colour":1'), "unknown field `colour`"),
     "missing-field": (b'{"type":"measurement","sensor_id":"r1","t_ns":5,"data":{"type":"cartesian","pos_m":[1],'
                       b'"std_m":[1]}}', "missing required field `seq`"),
     "wrong-type": (_json(RADAR.format(r='"far"', b=0.1, s=1)), "range_m"),
     "bad-id": (_json(RADAR.format(r=10, b=0.1, s=1), sensor='"a/b"'), "sensor_id"),
     "half-range-rate": (_json('{"type":"radar","range_m":1,"bearing_rad":0,"range_std_m":1,"bearing_std_rad":0.1,'
-                              '"range_rate_mps":1}'), "range_rate_mps and range_rate_std_mps"),
+                              '"range_rate_mps":1}'), "a standard deviation for every value present"),
+    "std-without-value": (_json('{"type":"radar","range_m":1,"bearing_rad":0,"range_std_m":1,"bearing_std_rad":0.1,'
+                                '"elevation_std_rad":0.1}'), "given for a value that is absent"),
 }
 
 
@@ -101,3 +103,33 @@ def test_keys() -> None:
     for bad in ("a/b", "a*", "", "x y", "$x"):
         with pytest.raises(m.InputError):
             m.meas_key("ns", bad)
+
+
+def test_every_message_carries_its_schema_version() -> None:
+    import msgspec
+
+    for msg in MEAS + OTHERS:
+        assert msgspec.msgpack.decode(m.encode(msg))["v"] == m.SCHEMA_VERSION
+        assert msgspec.json.decode(m.encode_json(msg))["v"] == m.SCHEMA_VERSION
+
+
+def test_an_unknown_schema_version_is_refused_with_the_reason() -> None:
+    import msgspec
+
+    from fusion.errors import UnsupportedVersionError
+
+    raw = msgspec.msgpack.decode(m.encode(MEAS[0]))
+    raw["v"] = m.SCHEMA_VERSION + 1
+    with pytest.raises(UnsupportedVersionError, match=f"this service reads version {m.SCHEMA_VERSION}"):
+        m.decode_measurement(msgspec.msgpack.encode(raw))
+    del raw["v"]  # a sender that leaves it out speaks version 1
+    assert m.decode_measurement(msgspec.msgpack.encode(raw)) == MEAS[0]
+
+
+def test_a_measurement_without_noise_takes_the_sensors_configured_noise() -> None:
+    from fusion.io.wire import detection_of
+
+    d = detection_of(m.Measurement(sensor_id="r1", t_ns=1, seq=0, data=m.Radar(range_m=10.0, bearing_rad=0.1)))
+    assert d.R is None
+    d = detection_of(m.Measurement(sensor_id="c", t_ns=1, seq=0, data=m.Cartesian(pos_m=[1.0, 2.0])))
+    assert d.R is None
