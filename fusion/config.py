@@ -135,12 +135,13 @@ class LifecycleConfig(Section):
 class TimeConfig(Section):
     """The out-of-order window, in sensor time.
 
-    The tracker's clock is robust to a few wrong timestamps: each valid measurement i gives an
-    offset t_i - a_i (a_i its arrival time, 0 when unknown) and now = a + the
-    (clock_outliers + 1)-th largest of the last clock_samples offsets: it follows the freshest
-    data, but clock_outliers wrong timestamps cannot push it. Data older than now - lag_s is
-    refused as too_late (the horizon only moves forward), data more than future_s ahead of now
-    as future. Inside the window late data
+    Every source (sensor, control source) has a clock robust to a few wrong timestamps: each
+    valid measurement i gives an offset t_i - a_i (a_i its arrival time, 0 when unknown) and
+    the source's clock is a + the (clock_outliers + 1)-th largest of its last clock_samples
+    offsets. The window follows the slowest source still active (delivered within the last
+    source_idle_s): data older than that watermark - lag_s are refused as too_late (the
+    horizon only moves forward), data more than future_s ahead of their source's clock as
+    future (fusion.tracking.clock). Inside the window late data
     is replayed exactly. max_lag_scans caps the history kept for replays (a memory guard:
     when it bites, older scans are committed early and data before them is too_late).
     """
@@ -149,6 +150,7 @@ class TimeConfig(Section):
     future_s: PosFloat = 10.0
     clock_samples: Annotated[int, msgspec.Meta(ge=1, le=1000)] = 16
     clock_outliers: Annotated[int, msgspec.Meta(ge=0, le=100)] = 1
+    source_idle_s: PosFloat = 5.0
     max_lag_scans: Annotated[int, msgspec.Meta(ge=1)] = 100_000
 
 

@@ -4,24 +4,19 @@ One detection at a time, in arrival order, so the outcome never depends on how a
 batched:
   1. validation against the configured sensors (shape, finiteness, range > 0, R symmetric
      positive definite via fusion.core.checks; a default R where the message has none);
-  2. the clock: each valid detection i adds the offset o_i = t_i - a_i to a window of the last
-     `clock_samples` offsets (a_i its arrival time, 0 when unknown), and
-         now = a + the (k+1)-th largest offset in the window   (k = clock_outliers),
-         horizon = max over admissions of (now - lag_s).
-     So now follows the freshest data, but k wrong timestamps cannot push it (nor lock the
-     window); after a silence the arrival times move it on;
-  3. refused as future when t > now + future_s (with arrival times, a detection judged future
-     is left out of the window; without them the data are the only clock, so it counts, and
-     k + 1 detections that agree on a jump move the clock on), as too_late when t < horizon
-     (or before a scan the history had to commit early), as duplicate when
-     (sensor_id, seq, t_ns) was accepted before.
+  2. time (fusion.tracking.clock): each source has a robust clock and the window follows the
+     watermark, the clock of the slowest active source:
+         horizon = max over admissions of (watermark - lag_s);
+  3. refused as future when t is more than future_s ahead of its source's clock (with arrival
+     times, data judged future do not count towards the clock; without them the data are the
+     only clock, so they count, and k + 1 that agree on a jump move it on), as too_late when
+     t < horizon (or before a scan the history had to commit early), as duplicate when
+     (source, seq, t_ns) was accepted before.
 """
 
 from __future__ import annotations
 
-import bisect
 import math
-from collections import deque
 from collections.abc import Mapping
 
 import numpy as np
@@ -30,38 +25,12 @@ from fusion.config import TimeConfig
 from fusion.core.checks import as_covariance
 from fusion.core.timebase import NS_PER_S
 from fusion.errors import InputError
+from fusion.tracking.clock import Clocks
 from fusion.tracking.detection import ControlInput, Detection, Reason, Refusal
 from fusion.tracking.models import SensorModel
 from fusion.tracking.results import ScanKey
 
 Identity = tuple[str, int, int]  # (sensor_id, seq, t_ns)
-
-
-class StreamClock:
-    """now = a + the (outliers+1)-th largest of the last `samples` offsets t_i - a_i (see the
-    module docstring); with fewer offsets than that, the smallest."""
-
-    def __init__(self, samples: int, outliers: int) -> None:
-        self._window: deque[int] = deque(maxlen=samples)
-        self._sorted: list[int] = []
-        self._rank = outliers + 1
-
-    def now(self, arrival_ns: int | None) -> int | None:
-        """The clock at an arrival (before the arriving detection counts); None before any data."""
-        if not self._sorted:
-            return None
-        return (0 if arrival_ns is None else arrival_ns) + self._sorted[max(len(self._sorted) - self._rank, 0)]
-
-    def observe(self, t_ns: int, arrival_ns: int | None) -> int:
-        """Add one detection's offset; return the clock at its arrival."""
-        a = 0 if arrival_ns is None else arrival_ns
-        if len(self._window) == self._window.maxlen:
-            old = self._window[0]
-            del self._sorted[bisect.bisect_left(self._sorted, old)]
-        o = t_ns - a
-        self._window.append(o)
-        bisect.insort(self._sorted, o)
-        return a + self._sorted[max(len(self._sorted) - self._rank, 0)]
 
 
 class Intake:
@@ -72,10 +41,12 @@ class Intake:
         self.sensors = sensors
         self.control_source = control_source
         self.control_dim = control_dim
-        self.clock = StreamClock(cfg.clock_samples, cfg.clock_outliers)
+        sources = [*sensors, *([control_source] if control_source else [])]
+        self.clocks = Clocks(sources, samples=cfg.clock_samples, outliers=cfg.clock_outliers,
+                             idle_ns=round(cfg.source_idle_s * NS_PER_S))
         self.lag_ns = round(cfg.lag_s * NS_PER_S)
         self.future_ns = round(cfg.future_s * NS_PER_S)
-        self.now_ns: int | None = None  # the clock at the last admission
+        self.now_ns: int | None = None  # the most advanced source clock seen
         self.horizon_ns: int | None = None  # data before it is committed: too late
         self.committed: ScanKey | None = None  # newest scan the history dropped
         self._seen: set[Identity] = set()
@@ -102,24 +73,34 @@ class Intake:
         return (None, bad) if bad is not None else (c, None)
 
     def _window(self, source: str, t_ns: int, seq: int, arrival_ns: int | None) -> Refusal | None:
-        """The clock, the window and the duplicate set (see the module docstring)."""
+        """The clocks, the window and the duplicate set (see the module docstring)."""
+        clocks = self.clocks
         if arrival_ns is None:  # no other clock: the data's own times, k + 1 that agree move it
-            now = self.now_ns = self.clock.observe(t_ns, None)
-        else:  # data judged future does not count towards the clock
-            now = self.now_ns = self.clock.now(arrival_ns)
-            if now is None or t_ns <= now + self.future_ns:
-                now = self.now_ns = self.clock.observe(t_ns, arrival_ns)
-        if t_ns > now + self.future_ns:
-            return Refusal(source, t_ns, seq, Reason.FUTURE, f"{(t_ns - now) / 1e9:.3f} s ahead of the stream's clock")
-        h = now - self.lag_ns
-        if self.horizon_ns is None or h > self.horizon_ns:
-            self.horizon_ns = h
+            clocks.observe(source, t_ns, None)
+            ref = clocks.reference(source, None)
+        else:  # data judged future do not count towards the clock
+            ref = clocks.reference(source, arrival_ns)
+            if ref is None or t_ns <= ref + self.future_ns:
+                clocks.observe(source, t_ns, arrival_ns)
+        if ref is not None:
+            self.now_ns = ref if self.now_ns is None else max(self.now_ns, ref)
+            if t_ns > ref + self.future_ns:
+                return Refusal(source, t_ns, seq, Reason.FUTURE,
+                               f"{(t_ns - ref) / 1e9:.3f} s ahead of {source}'s clock")
+        w = clocks.watermark(arrival_ns)
+        if w is not None and (self.horizon_ns is None or w - self.lag_ns > self.horizon_ns):
+            self.horizon_ns = w - self.lag_ns
+        if self.horizon_ns is None:
+            return self._new(source, t_ns, seq)
         if t_ns < self.horizon_ns:
             return Refusal(source, t_ns, seq, Reason.TOO_LATE,
                            f"{(self.horizon_ns - t_ns) / 1e9:.3f} s before the out-of-order window")
         if self.committed is not None and (t_ns, source) <= self.committed:
             return Refusal(source, t_ns, seq, Reason.TOO_LATE,
                            "before a scan the history committed early (max_lag_scans)")
+        return self._new(source, t_ns, seq)
+
+    def _new(self, source: str, t_ns: int, seq: int) -> Refusal | None:
         ident = (source, seq, t_ns)
         if ident in self._seen:
             return Refusal(source, t_ns, seq, Reason.DUPLICATE, f"seq {seq} of {source} at this time seen before")

@@ -188,6 +188,6 @@ def initial_covariance_diag(cfg: TrackerConfig, n: int, motion: MotionModel) -> 
     diag[list(motion.velocity_indices)] = cfg.init.velocity_std_mps**2
     if cfg.motion.model == "ca":
         diag[[i + 1 for i in motion.velocity_indices]] = cfg.init.acceleration_std_mps2**2
-    if n == 5 and layout(cfg.motion)[-1] == "omega":
+    if n == 5 and layout(cfg.motion, motion)[-1] == "omega":
         diag[4] = cfg.init.turn_rate_std_radps**2
     return diag

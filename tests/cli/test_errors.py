@@ -75,7 +75,7 @@ def test_missing_or_wrong_files(case: str, tmp_path: Path) -> None:
 
 @pytest.mark.parametrize(("text", "expected"), [
     (GOOD_SENSORS + '[tracker.motion]\nmodel = "imm-cv"\n',
-     r"bad\.toml:6: tracker\.motion\.model: 'imm-cv' is not one of 'ca', 'ct', 'cv', 'imm'; "
+     r"bad\.toml:6: tracker\.motion\.model: 'imm-cv' is not one of 'ca', 'ct', 'custom', 'cv', 'imm'; "
      r"did you mean 'imm'\?"),
     ('namspace = "x"\n' + GOOD_SENSORS,
      r"bad\.toml:1: namspace: unknown key 'namspace'; did you mean 'namespace'\? \(keys here: tracker, namespace"),

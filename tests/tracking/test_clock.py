@@ -89,3 +89,46 @@ def test_acceptance_does_not_depend_on_batching(size: int) -> None:
     assert counts.refused == ref_counts.refused and counts.applied == ref_counts.applied
     assert ref_counts.refused[Reason.DUPLICATE] == len(range(0, len(good), 17))
     assert Reason.FUTURE in ref_counts.refused and Reason.TOO_LATE in ref_counts.refused
+
+
+RADAR = Sensor("radar", "radar", period_s=0.1, range_std_m=2.0, bearing_std_rad=0.003, position_m=(-500.0, 0.0))
+
+
+def _two_sensor_stream(seconds: float = 20.0) -> list[Detection]:
+    rng = np.random.default_rng(8)
+    truth = constant_velocity(n_targets=2, duration_s=seconds, rng=rng, spread_m=200.0)
+    return [x.det for x in in_order(detect(truth, CART, rng=rng), detect(truth, RADAR, rng=rng))]
+
+
+def test_one_sources_whole_backlog_before_anothers_loses_nothing() -> None:
+    """Zenoh keeps order per key, not across keys: at full speed a whole sensor's stream can
+    arrive before another's. The window follows the slowest source, so nothing is too late."""
+    dets = _two_sensor_stream()
+    a0 = 10**18
+    order = [d for d in dets if d.sensor_id == "cart"] + [d for d in dets if d.sensor_id == "radar"]
+    tr = make_tracker([CART, RADAR], time=TimeConfig(lag_s=2.0))
+    r = tr.process([Detection(d.sensor_id, d.t_ns, d.seq, d.z, d.R, a0 + k * 1000) for k, d in enumerate(order)])
+    assert not r.refused and r.applied == len(dets)
+
+
+def test_a_slow_sensor_is_not_late_because_another_is_fast() -> None:
+    """The radar's data arrive 1.5 s after the camera's (lag 1 s): still in the window."""
+    dets = _two_sensor_stream()
+    arrival = {id(d): d.t_ns + (1_500_000_000 if d.sensor_id == "radar" else 20_000_000) for d in dets}
+    order = sorted(dets, key=lambda d: arrival[id(d)])
+    tr = make_tracker([CART, RADAR], time=TimeConfig(lag_s=1.0))
+    refused = []
+    for d in order:
+        refused += tr.process([Detection(d.sensor_id, d.t_ns, d.seq, d.z, d.R, arrival[id(d)])]).refused
+    assert refused == []
+
+
+def test_a_silent_sensor_stops_holding_the_window_back() -> None:
+    """A configured radar that never speaks holds the window for source_idle_s, then no more:
+    the history stays bounded."""
+    tr = make_tracker([CART, RADAR], time=TimeConfig(lag_s=1.0, source_idle_s=3.0))
+    cart = [d for d in _two_sensor_stream(30.0) if d.sensor_id == "cart"]
+    for d in cart:
+        tr.process([Detection(d.sensor_id, d.t_ns, d.seq, d.z, d.R, d.t_ns + 10_000_000)])
+    assert tr.horizon_ns is not None and tr.horizon_ns > 25 * S
+    assert len(tr.history) <= 11  # the scans of the last lag_s (0.1 s apart)

@@ -100,10 +100,11 @@ BAD = [
 
 def primed():
     """A tracker whose clock reads 3 s: measurements every 0.5 s up to 3 s, and a second one at
-    3 s (the clock believes a time once two measurements vouch for it: clock_outliers = 1)."""
+    3 s (a source's clock believes a time once two of its measurements vouch for it:
+    clock_outliers = 1). The radar has not spoken yet, so it does not hold the window back."""
     tr = tracker()
     tr.process([Detection.of("cart", k * S // 2, k, [0.0, 0.0]) for k in range(7)]
-               + [Detection.of("radar", 3 * S, 0, [500.0, 0.0])])
+               + [Detection.of("cart", 3 * S, 7, [500.0, 0.0])])
     assert tr.now_ns == 3 * S and tr.horizon_ns == 1 * S
     return tr
 

@@ -1,0 +1,98 @@
+"""The tracker's sense of time: a robust clock per source, and the watermark the window follows.
+
+Each source (a configured sensor, or the control source) has its own clock. Detection i of a
+source has the offset o_i = t_i - a_i (a_i its arrival time; 0 when arrival times are unknown)
+and the source's clock at arrival a is
+    clock_s(a) = a + the (k+1)-th largest of its last N offsets      (k = clock_outliers),
+so it follows the source's freshest data, but k wrong timestamps cannot push it; with arrival
+times it moves on by itself during a silence.
+
+The window follows the slowest source that is still active (a watermark, as in stream
+processing), so data are never "too late" because another sensor is faster, or because zenoh
+delivered another key's backlog first (it keeps order per key, not across keys):
+    watermark(a) = min over active sources of clock_s(a).
+A source is active while it has delivered something within the last source_idle_s of arrival
+time; a configured source that has not delivered yet holds the watermark back during the first
+source_idle_s after the first arrival. Without arrival times, a source is active while its
+clock is within source_idle_s of the most advanced source's.
+"""
+
+from __future__ import annotations
+
+import bisect
+from collections import deque
+from collections.abc import Iterable
+
+
+class SourceClock:
+    """clock(a) = a + the (outliers+1)-th largest of the last `samples` offsets t_i - a_i; with
+    fewer offsets than that, the smallest."""
+
+    def __init__(self, samples: int, outliers: int) -> None:
+        self._window: deque[int] = deque(maxlen=samples)
+        self._sorted: list[int] = []
+        self._rank = outliers + 1
+        self.last_arrival_ns: int | None = None
+
+    @property
+    def settled(self) -> bool:
+        """Enough offsets that `outliers` wrong ones cannot decide the clock."""
+        return len(self._sorted) >= self._rank
+
+    def now(self, arrival_ns: int | None) -> int | None:
+        """The clock at an arrival; None before any data."""
+        if not self._sorted:
+            return None
+        return (arrival_ns or 0) + self._sorted[max(len(self._sorted) - self._rank, 0)]
+
+    def observe(self, t_ns: int, arrival_ns: int | None) -> None:
+        a = arrival_ns or 0
+        if len(self._window) == self._window.maxlen:
+            del self._sorted[bisect.bisect_left(self._sorted, self._window[0])]
+        self._window.append(t_ns - a)
+        bisect.insort(self._sorted, t_ns - a)
+        self.last_arrival_ns = arrival_ns
+
+
+class Clocks:
+    """The clocks of every source and the watermark (see the module docstring)."""
+
+    def __init__(self, sources: Iterable[str], *, samples: int, outliers: int, idle_ns: int) -> None:
+        self.sources = {s: SourceClock(samples, outliers) for s in sorted(sources)}
+        self.idle_ns = idle_ns
+        self._first_arrival: int | None = None
+
+    def reference(self, source: str, arrival_ns: int | None) -> int | None:
+        """The clock that judges whether a time from `source` is in the future: the source's
+        own once settled, else the most advanced other source's (None before any data)."""
+        own = self.sources[source]
+        if own.settled:
+            return own.now(arrival_ns)
+        others = [c.now(arrival_ns) for s, c in self.sources.items() if s != source and c.settled]
+        return max((t for t in others if t is not None), default=own.now(arrival_ns))
+
+    def observe(self, source: str, t_ns: int, arrival_ns: int | None) -> None:
+        if arrival_ns is not None and self._first_arrival is None:
+            self._first_arrival = arrival_ns
+        self.sources[source].observe(t_ns, arrival_ns)
+
+    def watermark(self, arrival_ns: int | None) -> int | None:
+        """min over active sources of their clocks; None while a source that must be waited
+        for has no clock yet."""
+        if arrival_ns is None:
+            nows = [n for c in self.sources.values() if (n := c.now(None)) is not None]
+            if not nows:
+                return None
+            newest = max(nows)
+            return min(n for n in nows if n >= newest - self.idle_ns)
+        out: int | None = None
+        for c in self.sources.values():
+            if c.last_arrival_ns is None:
+                if self._first_arrival is not None and arrival_ns - self._first_arrival < self.idle_ns:
+                    return None  # it may still start: wait for it
+                continue
+            if arrival_ns - c.last_arrival_ns > self.idle_ns:
+                continue  # idle: it does not hold the others back
+            n = c.now(arrival_ns)
+            out = n if out is None or n < out else out  # type: ignore[operator]
+        return out
