@@ -102,7 +102,7 @@ def test_the_service_tracks_as_well_as_the_reference_filter(name: str, tmp_path:
     from fusion.scenarios import reference, run_reference
 
     spec, _ = scenario_config(name)
-    _, samples, _, got, svc = _run_live(name, tmp_path)
+    _, _, _, got, svc = _run_live(name, tmp_path)
     if name == "cv1d_d":
         assert svc.status_dict()["counts"]["applied"] == 100 and svc.tracker.counts.inputs == 100
     ref = reference(name, seed=spec.seed)
