@@ -45,6 +45,18 @@ class SourceClock:
             return None
         return (arrival_ns or 0) + self._sorted[max(len(self._sorted) - self._rank, 0)]
 
+    def state(self) -> tuple[list[int], int | None]:
+        """(offsets, oldest first; last arrival), for a checkpoint."""
+        return list(self._window), self.last_arrival_ns
+
+    def restore(self, offsets: list[int], last_arrival_ns: int | None) -> None:
+        self._window.clear()
+        self._sorted.clear()
+        for o in offsets[-(self._window.maxlen or len(offsets)):]:
+            self._window.append(o)
+            bisect.insort(self._sorted, o)
+        self.last_arrival_ns = last_arrival_ns
+
     def observe(self, t_ns: int, arrival_ns: int | None) -> None:
         a = arrival_ns or 0
         if len(self._window) == self._window.maxlen:
@@ -70,6 +82,13 @@ class Clocks:
             return own.now(arrival_ns)
         others = [c.now(arrival_ns) for s, c in self.sources.items() if s != source and c.settled]
         return max((t for t in others if t is not None), default=own.now(arrival_ns))
+
+    @property
+    def first_arrival_ns(self) -> int | None:
+        return self._first_arrival
+
+    def restore_first_arrival(self, arrival_ns: int | None) -> None:
+        self._first_arrival = arrival_ns
 
     def observe(self, source: str, t_ns: int, arrival_ns: int | None) -> None:
         if arrival_ns is not None and self._first_arrival is None:

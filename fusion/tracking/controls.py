@@ -37,6 +37,10 @@ class InputTimeline:
         self._keys.insert(k, (t_ns, seq))
         self._u.insert(k, u)
 
+    def items(self) -> list[tuple[int, int, Array]]:
+        """(t_ns, seq, u) of every input held, in order."""
+        return [(t, q, u) for (t, q), u in zip(self._keys, self._u, strict=True)]
+
     def at(self, t_ns: int) -> Array:
         """The input in force at t_ns (the last one at or before it; zero before any)."""
         k = bisect.bisect_right(self._keys, (t_ns, 2**63)) - 1

@@ -23,6 +23,7 @@ from scipy.special import chdtri
 
 from fusion.config import TrackerConfig
 from fusion.errors import ConfigError
+from fusion.tracking.checkpoint import TrackerState, restore, state_of
 from fusion.tracking.controls import InputTimeline
 from fusion.tracking.detection import ControlInput, Detection, Reason, Refusal
 from fusion.tracking.gating import make_gater
@@ -41,7 +42,7 @@ from fusion.tracking.results import (
     TrackEvent,
 )
 from fusion.tracking.scan import ScanContext, Tally, run_scan
-from fusion.tracking.trackset import Layout, Status, Track, TrackSet
+from fusion.tracking.trackset import Layout, Rows, Status, Track, TrackSet
 
 
 class Tracker:
@@ -74,9 +75,25 @@ class Tracker:
         self.history = History()
         self._ts = TrackSet.start(Layout(self.position_indices, self.velocity_indices, tuple(sorted(self.sensors)),
                                          self.motion.ndim_state, len(getattr(self.filter, "filters", ()))))
-        self._intake_counts = {"received": 0, "applied": 0, "inputs": 0}
-        self._refused: dict[Reason, int] = {}
-        self._arrival = {"replays": 0, "replayed_scans": 0, "rescans": 0, "late_applied": 0}
+        # the counters behind `counts` (and a checkpoint): intake, refusals, arrivals
+        self.intake_counts = {"received": 0, "applied": 0, "inputs": 0}
+        self.refused_counts: dict[Reason, int] = {}
+        self.arrival_counts = {"replays": 0, "replayed_scans": 0, "rescans": 0, "late_applied": 0}
+
+    # ---- checkpoints ------------------------------------------------------------------------
+    def state(self) -> TrackerState:
+        """Everything needed to resume (fusion.tracking.checkpoint)."""
+        return state_of(self)
+
+    @classmethod
+    def resume(cls, config: TrackerConfig, state: TrackerState) -> Tracker:
+        """The tracker that wrote `state`; ConfigError if `state` is not of this configuration."""
+        tr = cls(config)
+        restore(tr, state)
+        return tr
+
+    def restore_rows(self, rows: Rows) -> None:
+        self._ts = TrackSet(rows, self._ts.layout)
 
     # ---- views ------------------------------------------------------------------------------
     @property
@@ -106,12 +123,12 @@ class Tracker:
     def counts(self) -> Counts:
         t = self.history.tally()
         return Counts(
-            received=self._intake_counts["received"], applied=self._intake_counts["applied"],
-            inputs=self._intake_counts["inputs"],
-            refused=dict(sorted(self._refused.items())), updates=t[Tally.UPDATES], births=t[Tally.BIRTHS],
+            received=self.intake_counts["received"], applied=self.intake_counts["applied"],
+            inputs=self.intake_counts["inputs"],
+            refused=dict(sorted(self.refused_counts.items())), updates=t[Tally.UPDATES], births=t[Tally.BIRTHS],
             births_refused_capacity=t[Tally.BIRTHS_REFUSED_CAPACITY], unassigned=t[Tally.UNASSIGNED],
             confirmations=t[Tally.CONFIRMATIONS], numerical_skips=t[Tally.NUMERICAL_SKIPS],
-            deletions={r: t[r] for r in DeletionReason if t[r]}, **self._arrival,
+            deletions={r: t[r] for r in DeletionReason if t[r]}, **self.arrival_counts,
         )
 
     # ---- the algorithm ----------------------------------------------------------------------
@@ -159,7 +176,7 @@ class Tracker:
         inputs: list[ControlInput] = []
         refused: list[Refusal] = []
         for d in items:
-            self._intake_counts["received"] += 1
+            self.intake_counts["received"] += 1
             if isinstance(d, ControlInput):
                 c, bad = self.intake.admit_input(d)
                 if c is not None:
@@ -170,9 +187,9 @@ class Tracker:
                     accepted.append(ok)
             if bad is not None:
                 refused.append(bad)
-                self._refused[bad.reason] = self._refused.get(bad.reason, 0) + 1
-        self._intake_counts["applied"] += len(accepted)
-        self._intake_counts["inputs"] += len(inputs)
+                self.refused_counts[bad.reason] = self.refused_counts.get(bad.reason, 0) + 1
+        self.intake_counts["applied"] += len(accepted)
+        self.intake_counts["inputs"] += len(inputs)
         return accepted, inputs, refused
 
     def _count_arrival(self, accepted: list[Detection], inputs: list[ControlInput], newest: ScanKey | None,
@@ -180,12 +197,12 @@ class Tracker:
         late = sorted([(d.sensor_id, d.seq) for d in accepted if newest is not None and (d.t_ns, d.sensor_id) < newest]
                       + [(c.source_id, c.seq) for c in inputs if newest is not None and (c.t_ns, c.source_id) < newest])
         if late:  # a true replay: scans before the newest one are run again
-            self._arrival["replays"] += 1
-            self._arrival["replayed_scans"] += len(rw.old)
-            self._arrival["late_applied"] += len(late)
+            self.arrival_counts["replays"] += 1
+            self.arrival_counts["replayed_scans"] += len(rw.old)
+            self.arrival_counts["late_applied"] += len(late)
             return (Replay(rw.keys[0][0], len(rw.keys), tuple(late)),)
         if rw.old:  # more measurements of the newest scan: that scan alone is run again
-            self._arrival["rescans"] += 1
+            self.arrival_counts["rescans"] += 1
         return ()
 
     def _commit(self) -> None:

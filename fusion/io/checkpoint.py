@@ -1,0 +1,88 @@
+"""Tracker checkpoints on disk: written atomically, read back or refused with the reason.
+
+Writing: encode (msgpack) -> a temporary file in the same folder -> fsync -> rename over the
+checkpoint -> fsync the folder. A crash at any point leaves the old checkpoint or the new one,
+never a torn file. The file is the bytes MAGIC, then a msgpack CheckpointFile.
+
+Reading: a missing file is "no checkpoint"; a file that is not a checkpoint, is cut short, or
+was written by another configuration raises CheckpointError with the reason (the service then
+moves it aside and starts clean; it never crashes on one).
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import msgspec
+
+from fusion.config import TrackerConfig
+from fusion.errors import ConfigError, FusionError
+from fusion.tracking.checkpoint import TrackerState
+from fusion.tracking.tracker import Tracker
+
+MAGIC = b"FUSIONCK1\n"
+
+
+class CheckpointError(FusionError):
+    """A checkpoint file that cannot be used, with the reason."""
+
+
+class CheckpointFile(msgspec.Struct, frozen=True, forbid_unknown_fields=True, kw_only=True):
+    written_wall_ns: int
+    state: TrackerState
+
+
+_enc = msgspec.msgpack.Encoder()
+_dec = msgspec.msgpack.Decoder(CheckpointFile)
+
+
+def write_checkpoint(path: str | Path, tracker: Tracker, *, now_wall_ns: int | None = None) -> int:
+    """Write the tracker's state to `path` atomically; the number of bytes written."""
+    p = Path(path)
+    p.parent.mkdir(parents=True, exist_ok=True)
+    data = MAGIC + _enc.encode(CheckpointFile(written_wall_ns=now_wall_ns or time.time_ns(), state=tracker.state()))
+    tmp = p.with_name(f".{p.name}.{os.getpid()}.tmp")
+    with open(tmp, "wb") as f:
+        f.write(data)
+        f.flush()
+        os.fsync(f.fileno())
+    os.replace(tmp, p)
+    fd = os.open(p.parent, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+    return len(data)
+
+
+@dataclass(frozen=True)
+class Resumed:
+    tracker: Tracker
+    age_s: float  # wall time since the checkpoint was written
+    tracks: int
+
+
+def read_checkpoint(path: str | Path, config: TrackerConfig, *, now_wall_ns: int | None = None) -> Resumed | None:
+    """The tracker a checkpoint holds; None when there is none; CheckpointError when unusable."""
+    p = Path(path)
+    try:
+        data = p.read_bytes()
+    except FileNotFoundError:
+        return None
+    except OSError as e:
+        raise CheckpointError(f"{p}: cannot read it: {e.strerror or e}") from None
+    if not data.startswith(MAGIC):
+        raise CheckpointError(f"{p}: not a fusion checkpoint (it does not start with {MAGIC!r})")
+    try:
+        cf = _dec.decode(data[len(MAGIC):])
+    except msgspec.DecodeError as e:
+        raise CheckpointError(f"{p}: damaged or of another version: {e}") from None
+    try:
+        tracker = Tracker.resume(config, cf.state)
+    except (ConfigError, ValueError) as e:
+        raise CheckpointError(f"{p}: {e}") from None
+    age = ((now_wall_ns or time.time_ns()) - cf.written_wall_ns) / 1e9
+    return Resumed(tracker, age, len(tracker.track_set))
