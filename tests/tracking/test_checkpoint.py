@@ -81,7 +81,7 @@ def test_data_before_the_checkpoint_are_too_late_after_resuming(tmp_path: Path) 
     (lambda b: MAGIC + msgspec.msgpack.encode({"written_wall_ns": 1, "state": {"format": "x"}}),
      "damaged or of another version"),
 ], ids=["foreign", "torn", "another-format"])
-def test_a_bad_checkpoint_is_refused_with_the_reason(damage, message: str, tmp_path: Path) -> None:  # noqa: ANN001
+def test_a_bad_checkpoint_is_refused_with_the_reason(damage, message: str, tmp_path: Path) -> None:
     cfg = _config(MOTIONS["cv"])
     tr = Tracker(cfg)
     for b in _batches()[:6]:
