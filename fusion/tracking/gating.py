@@ -127,6 +127,11 @@ class Gated:
 class Gater(Protocol):
     def gate(self, ts: TrackSet, t_ns: int, ci: np.ndarray, cj: np.ndarray, meas: Measured) -> Gated: ...
 
+    def predict(self, ts: TrackSet, t_ns: int, rows: np.ndarray) -> tuple[Array, Array, Array | None]:
+        """Tracks `rows` (all at or before t_ns) predicted to t_ns: x, P (and IMM mode
+        probabilities)."""
+        ...
+
 
 def make_gater(filt: Filter, thresholds: dict[int, float], inputs: InputTimeline | None = None) -> Gater:
     """The batched gate where the filter and its motion models allow it, else pair by pair.
@@ -188,6 +193,14 @@ class PerPairGate:
         d = None if self.inputs is None else self.inputs.offset(state.t_ns, t_ns)
         return pred if d is None else GaussianState(pred.x + d, pred.P, t_ns)
 
+    def predict(self, ts: TrackSet, t_ns: int, rows: np.ndarray) -> tuple[Array, Array, Array | None]:
+        preds = [self._predict(ts.state(i), t_ns) for i in rows.tolist()]  # type: ignore[arg-type]
+        n = ts.layout.n_state
+        X = np.stack([p.x for p in preds]) if preds else np.zeros((0, n))
+        P = np.stack([p.P for p in preds]) if preds else np.zeros((0, n, n))
+        mu = np.stack([p.mu for p in preds]) if preds and isinstance(preds[0], IMMState) else None
+        return X, P, mu
+
     def gate(self, ts: TrackSet, t_ns: int, ci: np.ndarray, cj: np.ndarray, meas: Measured) -> Gated:
         preds: dict[int, GaussianState | IMMState] = {}
         kept = _Kept()
@@ -232,6 +245,15 @@ class _Batched(ABC):
     def _update(self, pred: object, rows: np.ndarray, Z: Array, R: Array, model: MeasurementModel
                 ) -> tuple[Array, Part]:
         """(log-likelihood, the stacked answers) for predicted rows `rows` and measurements Z."""
+
+    def predict(self, ts: TrackSet, t_ns: int, rows: np.ndarray) -> tuple[Array, Array, Array | None]:
+        if rows.size == 0:
+            n = ts.layout.n_state
+            return np.zeros((0, n)), np.zeros((0, n, n)), None
+        pred = self._predict(ts, t_ns, rows)
+        if isinstance(pred, StackPrediction):
+            return pred.x, pred.P, pred.c
+        return pred[0], pred[1], None  # type: ignore[index]
 
     def gate(self, ts: TrackSet, t_ns: int, ci: np.ndarray, cj: np.ndarray, meas: Measured) -> Gated:
         kept = _Kept()

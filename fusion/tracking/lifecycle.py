@@ -6,6 +6,7 @@ scans of other sensors, or a burst of returns elsewhere, never wear a track down
   hit:        hits += 1, chances += 1, misses = 0; a tentative track with hits >= M within its
               first N chances is confirmed;
   no hit:     a chance adds chances += 1, misses += 1;
+  coasting:   a confirmed track that misses a chance after a hit (an event; it lives on);
   deletion:   tentative with chances >= N and hits < M ("not confirmed"); confirmed with
               misses > max_misses ("misses"); any track without an update for coast_s
               ("coasted") or with a predicted position std above max_position_std_m
@@ -69,7 +70,9 @@ class Lifecycle:
         coasted = (t_ns - after.t_ns) > self.coast_ns
         too_wide = pvar.max(axis=1) > cfg.max_position_std_m**2 if pvar.size else np.zeros(len(after), bool)
         delete = not_confirmed | missed | coasted | too_wide
-        events = []
+        # a confirmed track that misses its first chance after a hit starts coasting
+        coasting = ~tent & ~delete & (misses == 1) & (after.misses == 0)
+        events = [TrackEvent(EventKind.COASTING, int(after.ids[i]), t_ns) for i in np.flatnonzero(coasting).tolist()]
         for i in np.flatnonzero(delete).tolist():
             why = (DeletionReason.NOT_CONFIRMED if not_confirmed[i] else DeletionReason.MISSES if missed[i]
                    else DeletionReason.COASTED if coasted[i] else DeletionReason.COVARIANCE)

@@ -27,6 +27,7 @@ EstimateKey = tuple[int, int, str]  # (track_id, t_ns, sensor_id)
 class EventKind(StrEnum):
     BORN = "born"
     CONFIRMED = "confirmed"
+    COASTING = "coasting"  # a confirmed track missed a chance after a hit (it lives on)
     DELETED = "deleted"
 
 
@@ -62,7 +63,7 @@ class Estimate:
     seq: int  # the measurement that updated (or started) the track; -1 for a retraction
     x: Array
     P: Array
-    status: str  # "tentative" | "confirmed" | "retracted"
+    status: str  # "tentative" | "confirmed" | "retracted" | "predicted" (Tracker.predict)
     revision: int
     nis: float | None
     y: Array | None
@@ -93,7 +94,8 @@ class Estimate:
 
 @dataclass(frozen=True, slots=True)
 class TrackEvent:
-    """born | confirmed | deleted (with its reason), at the time of the scan that caused it.
+    """born | confirmed | coasting | deleted (with its reason), at the time of the scan that
+    caused it.
     retracted=True withdraws an event reported earlier (a replay no longer produces it)."""
 
     kind: EventKind

@@ -131,6 +131,24 @@ class Tracker:
             deletions={r: t[r] for r in DeletionReason if t[r]}, **self.arrival_counts,
         )
 
+    def predict(self, t_ns: int) -> list[Estimate]:
+        """Every confirmed track predicted to t_ns, with its covariance (status "predicted";
+        sensor and seq of its last update). A track updated after t_ns is not predicted
+        backwards: it is given at its last update (status "confirmed")."""
+        ts = self._ts
+        conf = np.flatnonzero(ts.status == Status.CONFIRMED)
+        ahead = conf[ts.t_ns[conf] <= t_ns]
+        X, P, mu = self.ctx.gater.predict(ts, t_ns, ahead)
+        names = ts.layout.sensors
+        out = [Estimate(int(ts.ids[i]), t_ns, names[int(ts.last_sensor[i])], int(ts.last_seq[i]), X[k], P[k],
+                        "predicted", 0, None, None, None, None if mu is None else mu[k])
+               for k, i in enumerate(ahead.tolist())]
+        for i in conf[ts.t_ns[conf] > t_ns].tolist():
+            st = ts.state(i)
+            out.append(Estimate(int(ts.ids[i]), st.t_ns, names[int(ts.last_sensor[i])], int(ts.last_seq[i]), st.x,
+                                st.P, "confirmed", 0, None, None, None, getattr(st, "mu", None)))
+        return sorted(out, key=lambda e: e.track_id)
+
     # ---- the algorithm ----------------------------------------------------------------------
     def process(self, items: Iterable[Detection | ControlInput]) -> StepResult:
         """Take measurements and control inputs (any order, any mix of sensors); return what

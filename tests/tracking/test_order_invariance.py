@@ -67,7 +67,7 @@ def test_reference_stream_is_nontrivial() -> None:
     _tracks, latest, tracker, consumer = reference()
     assert len(tracker.confirmed()) == 3, "the reference run holds the three targets"
     kinds = {k[0] for k in consumer.events}
-    assert kinds == {"born", "confirmed", "deleted"}, kinds
+    assert kinds == {"born", "confirmed", "coasting", "deleted"}, kinds
     assert len(consumer.published()) > 50
     assert tracker.counts.applied == len(dets)
     assert {k[2] for k in latest} == {"cart", "radar"}
