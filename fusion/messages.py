@@ -11,8 +11,10 @@ Key expressions, under a namespace NS (ids: letters, digits, '_', '-', '.'):
     fusion/NS/input/SOURCE_ID    Input                (a known control input: fusion/NS/input/*)
     fusion/NS/truth/TARGET_ID    Truth                (fusion/NS/truth/*)
     fusion/NS/tracks/TRACK_ID    Estimate             (fusion/NS/tracks/*)
+    fusion/NS/events/TRACK_ID    Event                (confirmed, coasting, deleted: fusion/NS/events/*)
     fusion/NS/status             ServiceStatus        (queryable)
-    fusion/NS/snapshot           Snapshot             (queryable: latest estimate per confirmed track)
+    fusion/NS/snapshot           Snapshot             (queryable: latest estimate per confirmed track;
+                                                       ?t_ns=T: every confirmed track predicted to T)
 """
 
 from __future__ import annotations
@@ -157,10 +159,24 @@ class Estimate(Base, tag="estimate", kw_only=True):
     cov: list[float]  # row-major n*n
     layout: list[str]
     model: str
-    status: Literal["tentative", "confirmed", "retracted"]
+    status: Literal["tentative", "confirmed", "retracted", "predicted"]
     revision: int
     nis: float | None = None
     mode_probabilities: list[float] | None = None
+
+
+class Event(Base, tag="event", kw_only=True):
+    """A published track's lifecycle at sensor time t_ns: confirmed, coasting (it missed a
+    chance: no update this scan), or deleted (with the reason). withdrawn=True takes back an
+    event sent before: a late measurement changed the past, and the track's history no longer
+    has it."""
+
+    v: Version = msgspec.field(default_factory=_schema_version)
+    track_id: int
+    t_ns: TimeNs
+    kind: Literal["confirmed", "coasting", "deleted"]
+    reason: str | None = None
+    withdrawn: bool = False
 
 
 class LatencyStats(Base, kw_only=True):
@@ -201,7 +217,7 @@ class Snapshot(Base, tag="snapshot", kw_only=True):
     estimates: list[Estimate]
 
 
-Message = Measurement | Input | Truth | Estimate | ServiceStatus | Snapshot
+Message = Measurement | Input | Truth | Estimate | Event | ServiceStatus | Snapshot
 
 _enc = msgspec.msgpack.Encoder()
 _json_enc = msgspec.json.Encoder()
@@ -209,6 +225,7 @@ _dec_meas = msgspec.msgpack.Decoder(Measurement)
 _dec_truth = msgspec.msgpack.Decoder(Truth)
 _dec_input = msgspec.msgpack.Decoder(Input)
 _dec_est = msgspec.msgpack.Decoder(Estimate)
+_dec_event = msgspec.msgpack.Decoder(Event)
 _dec_status = msgspec.msgpack.Decoder(ServiceStatus)
 _dec_snap = msgspec.msgpack.Decoder(Snapshot)
 _dec_any = msgspec.msgpack.Decoder(Message)
@@ -252,6 +269,10 @@ def decode_truth(data: bytes) -> Truth:
 
 def decode_estimate(data: bytes) -> Estimate:
     return _decode(_dec_est, data, "estimate")  # type: ignore[return-value]
+
+
+def decode_event(data: bytes) -> Event:
+    return _decode(_dec_event, data, "event")  # type: ignore[return-value]
 
 
 def decode_status(data: bytes) -> ServiceStatus:
@@ -310,6 +331,14 @@ def all_truth_key(ns: str) -> str:
     return f"fusion/{check_id('namespace', ns)}/truth/*"
 
 
+def event_key(ns: str, track_id: int) -> str:
+    return f"fusion/{check_id('namespace', ns)}/events/{int(track_id)}"
+
+
+def all_events_key(ns: str) -> str:
+    return f"fusion/{check_id('namespace', ns)}/events/*"
+
+
 def all_tracks_key(ns: str) -> str:
     return f"fusion/{check_id('namespace', ns)}/tracks/*"
 
@@ -326,5 +355,6 @@ def key_kind(key: str) -> str:
     """"meas", "input", "truth", "tracks", "status", "snapshot" or "other" for a key expression."""
     parts = key.split("/")
     if len(parts) >= 3 and parts[0] == "fusion":
-        return parts[2] if parts[2] in ("meas", "input", "truth", "tracks", "status", "snapshot") else "other"
+        kinds = ("meas", "input", "truth", "tracks", "events", "status", "snapshot")
+        return parts[2] if parts[2] in kinds else "other"
     return "other"

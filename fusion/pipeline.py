@@ -28,7 +28,7 @@ from fusion.io.latency import LatencyTracker
 from fusion.io.ratelimit import RateLimitedLog
 from fusion.publication import PublishedView
 from fusion.tracking.detection import ControlInput, Detection, Reason
-from fusion.tracking.results import Counts, Estimate, StepResult
+from fusion.tracking.results import Counts, Estimate, StepResult, TrackEvent
 from fusion.tracking.tracker import Tracker
 
 log = logging.getLogger("fusion.pipeline")
@@ -69,6 +69,7 @@ class Sink(Protocol):
 class Output:
     result: StepResult
     to_publish: tuple[Estimate, ...]
+    events_to_publish: tuple[TrackEvent, ...] = ()
 
 
 class Pipeline:
@@ -168,8 +169,9 @@ class Pipeline:
         if self.sink is not None and (result.estimates or result.events or result.refused or result.measurements):
             self.sink.log_step(result, arrival_ns=last_arrival)
         pub = self.view.select(result.estimates)
+        events = self.view.select_events(result.events)
         self.view.prune(self.tracker.horizon_ns, self.tracker.track_set)
-        return Output(result, pub)
+        return Output(result, pub, events)
 
     def snapshot(self) -> list[Estimate]:
         """The latest published estimate of every live confirmed track."""

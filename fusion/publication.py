@@ -7,6 +7,11 @@ revision per key and drops keys whose latest revision is retracted or tentative:
 then the same for any arrival order (a replay that demotes a published estimate to tentative
 publishes the demotion).
 
+Events: confirmed, coasting and deleted events of the tracks whose estimates were published
+(not born: every clutter return starts a track), and the withdrawal of any event published
+before. A subscriber holding the events not withdrawn ends up with the same set for any arrival
+order.
+
 The snapshot (the `snapshot` queryable) follows the tracker, not the history of publications:
 the latest published estimate of every live confirmed track.
 """
@@ -15,7 +20,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 
-from fusion.tracking.results import Estimate, EstimateKey
+from fusion.tracking.results import Estimate, EstimateKey, EventKind, TrackEvent
 from fusion.tracking.trackset import Status, TrackSet
 
 
@@ -23,6 +28,8 @@ class PublishedView:
     def __init__(self, *, publish_tentative: bool = False) -> None:
         self.publish_tentative = publish_tentative
         self.latest: dict[EstimateKey, Estimate] = {}  # published keys -> latest published revision
+        self.tracks: dict[int, int] = {}  # published track ids -> time of their latest published estimate
+        self.events: dict[tuple[str, int, int, str], TrackEvent] = {}  # published, not withdrawn
         self._pruned_at: int | None = None
 
     def select(self, estimates: Iterable[Estimate]) -> tuple[Estimate, ...]:
@@ -32,7 +39,20 @@ class PublishedView:
             k = e.key
             if k in self.latest or e.status == "confirmed" or (self.publish_tentative and e.status == "tentative"):
                 self.latest[k] = e
+                self.tracks[e.track_id] = max(e.t_ns, self.tracks.get(e.track_id, e.t_ns))
                 out.append(e)
+        return tuple(out)
+
+    def select_events(self, events: Iterable[TrackEvent]) -> tuple[TrackEvent, ...]:
+        """The events of one step to publish (see the module docstring); call after `select`."""
+        out = []
+        for ev in events:
+            if ev.retracted:
+                if self.events.pop(ev.key, None) is not None:
+                    out.append(ev)
+            elif ev.kind != EventKind.BORN and ev.track_id in self.tracks:
+                self.events[ev.key] = ev
+                out.append(ev)
         return tuple(out)
 
     def snapshot(self, tracks: TrackSet) -> list[Estimate]:
@@ -61,3 +81,8 @@ class PublishedView:
         current = self._current(tracks)
         for k in [k for k in self.latest if k[1] < horizon_ns and k not in current]:
             del self.latest[k]
+        live = {int(i) for i in tracks.ids.tolist()}
+        for tid in [t for t, last in self.tracks.items() if last < horizon_ns and t not in live]:
+            del self.tracks[tid]
+        for k in [k for k in self.events if k[2] < horizon_ns]:
+            del self.events[k]

@@ -10,7 +10,7 @@ import numpy as np
 
 from fusion import messages as m
 from fusion.tracking.detection import ControlInput, Detection
-from fusion.tracking.results import Estimate
+from fusion.tracking.results import Estimate, TrackEvent
 
 STREAM_SUFFIX = ".fstream"
 
@@ -93,6 +93,11 @@ def estimate_message(e: Estimate, *, layout: tuple[str, ...], model: str) -> m.E
         revision=e.revision, nis=e.nis,
         mode_probabilities=None if e.mode_probabilities is None else e.mode_probabilities.tolist(),
     )
+
+
+def event_message(ev: TrackEvent) -> m.Event:
+    return m.Event(track_id=ev.track_id, t_ns=ev.t_ns, kind=ev.kind.value,  # type: ignore[arg-type]
+                   reason=None if ev.reason is None else ev.reason.value, withdrawn=ev.retracted)
 
 
 def estimate_encoder(layout: tuple[str, ...], model: str) -> Callable[[Estimate], bytes]:

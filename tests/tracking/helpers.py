@@ -43,6 +43,7 @@ class Consumer:
         self.events: set[tuple[str, int, int, str]] = set()
         self.view = PublishedView()
         self.subscribed: dict[EstimateKey, Estimate] = {}
+        self.subscribed_events: set[tuple[str, int, int, str]] = set()
         self.n_revised = 0
         self.n_retracted = 0
         self.n_withdrawn = 0
@@ -58,6 +59,11 @@ class Consumer:
                 self.events.add(ev.key)
         for e in self.view.select(result.estimates):
             self.subscribed[e.key] = e
+        for ev in self.view.select_events(result.events):
+            if ev.retracted:
+                self.subscribed_events.discard(ev.key)
+            else:
+                self.subscribed_events.add(ev.key)
         for e in result.estimates:
             key = (e.track_id, e.t_ns, e.sensor_id)
             prev = self.last_revision.get(key)

@@ -69,6 +69,7 @@ def test_reference_stream_is_nontrivial() -> None:
     kinds = {k[0] for k in consumer.events}
     assert kinds == {"born", "confirmed", "coasting", "deleted"}, kinds
     assert len(consumer.published()) > 50
+    assert {k[0] for k in consumer.subscribed_events} == {"confirmed", "coasting"}  # the 3 targets live on
     assert tracker.counts.applied == len(dets)
     assert {k[2] for k in latest} == {"cart", "radar"}
 
@@ -101,6 +102,7 @@ def test_arrival_order_does_not_change_the_result(draw: tuple[list[int], list[in
     assert latest == ref_latest
     assert consumer.events == ref_consumer.events
     assert consumer.published() == ref_consumer.published()
+    assert consumer.subscribed_events == ref_consumer.subscribed_events
     assert data_counts(tracker) == data_counts(ref_tracker)
 
 
@@ -117,4 +119,5 @@ def test_a_fixed_delay_draw_exercises_replays_and_revisions() -> None:
     assert consumer.snapshot() == ref_latest
     assert consumer.events == ref_consumer.events
     assert consumer.published() == ref_consumer.published()
+    assert consumer.subscribed_events == ref_consumer.subscribed_events
     assert data_counts(tracker) == data_counts(ref_tracker)

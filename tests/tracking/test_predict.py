@@ -24,7 +24,7 @@ MOTIONS = {
 }
 
 
-def _tracker(name: str):  # noqa: ANN202
+def _tracker(name: str):
     tr = make_tracker([CART], motion=MOTIONS[name])
     for k in range(8):  # a target moving at 10 m/s along x
         tr.process([Detection.of("cart", k * S // 2, k, [5.0 * k, 0.0])])
