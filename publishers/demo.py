@@ -101,11 +101,12 @@ def _wait_idle(svc: Service, runner: threading.Thread, stop: threading.Event, ti
             return
 
 
-def run_demo(*, scenario: str = "mix", duration_s: float | None = 30.0, out: str | Path | None = None,
+def run_demo(*, scenario: str = "mix", duration_s: float | None = None, out: str | Path | None = None,
              seed: int | None = None, speed: float = 10.0, stop: threading.Event | None = None,
              progress: Progress | None = None) -> DemoResult:
     """Run the scenario end to end; returns what happened (the files are complete on return).
-    out: the recording (default recordings/<scenario>.rrd); the stream goes beside it."""
+    duration_s: seconds of scenario time (default: the whole scenario). out: the recording
+    (default recordings/<scenario>.rrd); the stream goes beside it."""
     import zenoh
 
     sf = load_scenario_file(scenario_path(scenario))
@@ -116,7 +117,9 @@ def run_demo(*, scenario: str = "mix", duration_s: float | None = 30.0, out: str
         spec = msgspec.structs.replace(spec, duration_s=duration_s)
     out = Path(out) if out is not None else default_out(scenario)
     stream = out.with_suffix(".fstream")
-    samples, _ = build_stream(spec, namespace=sf.service.namespace)
+    samples, truths = build_stream(spec, namespace=sf.service.namespace)
+    if duration_s is None:
+        duration_s = max(int(t.t_ns[-1]) for t in truths if t.t_ns.size) / 1e9
     planned = Counter(s.key.split("/")[2] for s in samples)
     stop = stop if stop is not None else threading.Event()
     if stop.is_set():  # stopped while the stream was being built: nothing has been written

@@ -43,8 +43,8 @@ def add(sub: Any, common: argparse.ArgumentParser) -> None:
                         formatter_class=a.Formatter)
     dp.add_argument("-s", "--scenario", default="mix", type=a.choice(names, "scenario"), metavar="NAME",
                     help=f"one of: {', '.join(names)} (default: mix)")
-    dp.add_argument("--duration", type=a.positive_float, default=30.0, metavar="S",
-                    help="seconds of scenario time (default: 30)")
+    dp.add_argument("--duration", type=a.positive_float, metavar="S",
+                    help="seconds of scenario time (default: the whole scenario)")
     dp.add_argument("-o", "--out", type=Path, metavar="FILE.rrd",
                     help="the recording to write; the .fstream goes beside it (default: recordings/<scenario>.rrd)")
     dp.add_argument("--seed", type=a.seed, metavar="N", help="override the scenario's seed (default: the scenario's)")
@@ -85,7 +85,8 @@ def demo(args: argparse.Namespace) -> int:
     pin_blas_threads()
     out = args.out or default_out(args.scenario)
     stop = threading.Event()
-    status(args, f"demo {args.scenario}: simulating {args.duration:g} s of scenario time ...")
+    span = "the whole scenario" if args.duration is None else f"{args.duration:g} s of scenario time"
+    status(args, f"demo {args.scenario}: simulating {span} ...")
     _on_interrupt(stop, out)
     with bar(enabled=wanted(args), desc=f"demo {args.scenario}", unit="meas") as b:
         r = run_demo(scenario=args.scenario, duration_s=args.duration, out=out, seed=args.seed, speed=args.speed,

@@ -306,3 +306,11 @@ def test_demo_runs(tmp_path: Path) -> None:
     assert len(r.summary.tracks) >= 4
     assert r.summary.position_rmse is not None and r.summary.position_rmse < 10.0
     assert "rerun " in demo_report(r)
+
+
+@pytest.mark.parametrize(("name", "steps"), [("cv1d_c", 50), ("helix3d", 100)], ids=str)
+def test_the_demo_runs_the_whole_scenario_by_default(name: str, steps: int, tmp_path: Path) -> None:
+    from publishers.demo import run_demo
+
+    r = run_demo(scenario=name, out=tmp_path / f"{name}.rrd", speed=0.0)
+    assert r.published.get("meas") == steps and r.counts["applied"] == steps
