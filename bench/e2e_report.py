@@ -19,7 +19,7 @@ def spread(xs: list[Any], fmt: str = ",.0f") -> str:
 def throughput_line(r: dict[str, Any]) -> str:
     rate = "n/a" if r["rate"] is None else f"{r['rate']:,.0f}/s"
     end = (f"drained {r['drain_s']:.1f} s after the last put" if r["drained"]
-           else f"{r['queued_end']:,} still queued")
+           else f"{r['unhandled_end']:,} not handled yet{'' if r['warm'] else ', window before the warm-up ended'}")
     rec = "on" if r["recording"] else "off"
     return (f"service T={r['targets']} recording {rec}: {rate} over {r['window_s']:.1f} s, {end} "
             f"(primer {r['prime_s']:.1f} s, {r['status_updates']} status updates)")
@@ -28,7 +28,7 @@ def throughput_line(r: dict[str, Any]) -> str:
 def latency_line(r: dict[str, Any]) -> str:
     return (f"latency {r['rate']}/s T={r['targets']} recording {'on' if r['recording'] else 'off'}: "
             f"p50 {_ms(r, 'p50_ms')}, p99 {_ms(r, 'p99_ms')}, max {_ms(r, 'max_ms')} ms, coverage {r['coverage']:.2f}"
-            f"{'' if r['kept_up'] else ', fell behind: ' + format(r['queued_end'], ',') + ' queued'}")
+            f"{'' if r['kept_up'] else ', fell behind: ' + format(r['unhandled_end'], ',') + ' not handled'}")
 
 
 def _ms(r: dict[str, Any], key: str) -> str:
@@ -59,8 +59,10 @@ def print_throughput(out: dict[str, Any], *, repeats: int, n: int) -> None:
             drain = [r["drain_s"] for r in rs]
             notes = []
             if not all(r["drained"] for r in rs):
-                q = [r["queued_end"] for r in rs if not r["drained"]]
-                notes.append(f"not drained ({len(q)}/{len(rs)}): {spread(q)} queued at the deadline")
+                q = [r["unhandled_end"] for r in rs if not r["drained"]]
+                notes.append(f"not drained ({len(q)}/{len(rs)}): {spread(q)} not handled at the deadline")
+            if not all(r["warm"] for r in rs):
+                notes.append(f"window includes the warm-up ({sum(not r['warm'] for r in rs)}/{len(rs)})")
             if not all(r["counts_add_up"] for r in rs):
                 notes.append("COUNTS DO NOT ADD UP")
             refused = {k for r in rs for k in r["refused"]}
@@ -82,7 +84,7 @@ def print_latency(out: dict[str, Any], *, repeats: int, duration_s: float) -> No
             notes = []
             if not all(r["kept_up"] for r in rs):
                 notes.append(f"fell behind ({sum(not r['kept_up'] for r in rs)}/{len(rs)}): "
-                             f"{spread([r['queued_end'] for r in rs])} queued at the deadline")
+                             f"{spread([r['unhandled_end'] for r in rs])} not handled at the deadline")
             notes.append(f"publisher late p50 {spread([r['publisher_late_p50_ms'] for r in rs], '.2f')} ms, "
                          f"burst {spread([r['burst_p50_ms'] for r in rs], '.2f')} ms")
             print(f"{rate:>8} {rs[0]['targets']:>7} {'on' if rec else 'off':>9} {lat_cell(rs, 'p50_ms'):>22} "

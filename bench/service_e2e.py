@@ -48,11 +48,14 @@ def prime(svc: ServiceProcess, pub: Publisher, *, timeout_s: float) -> tuple[flo
 
 
 def throughput_run(pub: Publisher, folder: Path, *, n: int, targets: int, recording: bool, window_s: float,
-                   deadline_s: float) -> dict[str, Any]:
+                   warm_deadline_s: float, after_warm_s: float) -> dict[str, Any]:
     """One blast of the prepared messages at a fresh service; see the module docstring. The
     service refreshes its status between batches (up to intake.batch_max = 5000 samples), so
-    the window runs from the first refresh after 4T were applied to the first refresh at least
-    window_s later, or to the drain, or to the last refresh before deadline_s."""
+    the window runs from the first refresh after 4T were applied (warm-up: births and
+    confirmation) to the first refresh at least window_s later, or to the drain, or to the last
+    refresh before the deadline (warm_deadline_s from the blast for the warm-up, then
+    window_s + after_warm_s). Without a refresh after the warm-up, the window is the whole run
+    ("warm": False)."""
     estimates = [0]
 
     def on_estimate(_t: int, _p: bytes) -> None:
@@ -83,7 +86,9 @@ def throughput_run(pub: Publisher, folder: Path, *, n: int, targets: int, record
                     break
                 if first is not None and len(snaps) - 1 > first and now >= snaps[first][0] + window_s:
                     break
-            if now > t_start + deadline_s:
+            if first is None and now > t_start + warm_deadline_s:
+                break
+            if first is not None and now > snaps[first][0] + window_s + after_warm_s:
                 break
             time.sleep(0.1)
         if blast is None:
@@ -91,19 +96,21 @@ def throughput_run(pub: Publisher, folder: Path, *, n: int, targets: int, record
         pub.call("disconnect")
         disk = svc.folder_bytes() if recording else {}
     last = snaps[-1][1]
-    a = snaps[first][1] if first is not None and first < len(snaps) - 1 else snaps[0][1]
+    warm = first is not None and first < len(snaps) - 1
+    a = snaps[first][1] if warm else snaps[0][1]  # type: ignore[index]
     span = last.uptime_s - a.uptime_s
     c = last.counts
     out: dict[str, Any] = {
         "targets": targets, "recording": recording, "sent": blast["sent"],
         "send_rate": blast["sent"] / max(blast["t1_ns"] - blast["t0_ns"], 1) * 1e9,
         "rate": (c.applied - a.counts.applied) / span if span > 0 else None,
-        "window_s": span, "window_applied": c.applied - a.counts.applied, "warm": first is not None,
+        "window_s": span, "window_applied": c.applied - a.counts.applied, "warm": warm,
         "drained": drained_wall is not None,
         "drain_s": None if drained_wall is None else (drained_wall - blast["t1_ns"]) / 1e9,
         "total_rate": None if drained_wall is None
         else (c.applied - base.applied) / ((drained_wall - blast["t0_ns"]) / 1e9),
-        "prime_s": prime_s, "queued_end": c.queued, "received": c.received, "applied": c.applied,
+        "prime_s": prime_s, "unhandled_end": base.received + n - (c.received - c.queued),
+        "received": c.received, "applied": c.applied,
         "refused": dict(c.refused), "duplicates": c.duplicates, "replays": c.replays, "published": c.published,
         "estimates_seen": estimates[0], "counts_add_up": bad_counts == 0, "status_updates": len(snaps),
         "tracks": dict(last.tracks),
@@ -160,7 +167,8 @@ def latency_run(pub: Publisher, folder: Path, *, rate: int, recording: bool, dur
         "estimates": len(lat), "coverage": len(lat) / offered_after_warm,
         "p50_ms": pct(50), "p99_ms": pct(99), "max_ms": pct(100),
         "kept_up": kept_up, "waited_after_publishing_s": waited_s,
-        "queued_end": None if c is None else c.queued, "refused": None if c is None else dict(c.refused),
+        "unhandled_end": None if c is None else base.received + sent["sent"] - (c.received - c.queued),
+        "refused": None if c is None else dict(c.refused),
     }
 
 
@@ -209,8 +217,8 @@ def run(*, quick: bool = False) -> dict[str, Any]:
 
     repeats = 1 if quick else 3
     n = 60_000 if quick else 150_000
-    window_s, deadline_s = (4.0, 40.0) if quick else (5.0, 45.0)
-    dur, grace = (5.0, 3.0) if quick else (6.0, 4.0)
+    window_s, warm_dl, after_warm_s = (4.0, 40.0, 30.0) if quick else (5.0, 60.0, 40.0)
+    dur, grace = (4.0, 2.0) if quick else (5.0, 3.0)
     out: dict[str, Any] = {"throughput": [], "baseline": [], "latency": [], "loadavg_start": os.getloadavg()}
     print(f"end to end: fusion serve --config configs/service.toml; load average {out['loadavg_start']}", flush=True)
     with tempfile.TemporaryDirectory(prefix="fusion-e2e-") as d, Publisher() as pub:
@@ -225,7 +233,7 @@ def run(*, quick: bool = False) -> dict[str, Any]:
                 print(f"  zenoh baseline: {base['rate']:,.0f}/s", flush=True)
                 for rec in (True, False):
                     r = throughput_run(pub, tmp / f"tp-{targets}-{rec}-{rep}", n=n, targets=targets, recording=rec,
-                                       window_s=window_s, deadline_s=deadline_s)
+                                       window_s=window_s, warm_deadline_s=warm_dl, after_warm_s=after_warm_s)
                     out["throughput"].append(r | {"baseline_rate": base["rate"]})
                     print("  " + throughput_line(r), flush=True)
         for rate in (1_000, 10_000):

@@ -73,7 +73,8 @@ def test_short_runs_against_a_real_service(tmp_path: Path) -> None:
 
     with Publisher() as pub:
         pub.call("prepare", {"targets": 10, "messages": 1500, "seed": 1}, timeout_s=120.0)
-        r = throughput_run(pub, tmp_path / "tp", n=1500, targets=10, recording=True, window_s=1.0, deadline_s=120.0)
+        r = throughput_run(pub, tmp_path / "tp", n=1500, targets=10, recording=True, window_s=1.0,
+                           warm_deadline_s=120.0, after_warm_s=60.0)
         assert r["drained"] and r["counts_add_up"] and not r["refused"], r
         assert r["applied"] == r["received"] and r["recording_bytes_per_meas"] > 0
         lat = latency_run(pub, tmp_path / "lat", rate=150, recording=False, duration_s=4.0, grace_s=30.0, warm_s=1.0)
