@@ -93,8 +93,8 @@ def print_latency(out: dict[str, Any], *, repeats: int, duration_s: float) -> No
 
 
 def print_soak(r: dict[str, Any]) -> None:
-    print(f"\nsoak: {r['rate']}/s offered ({r['targets']} targets) for {r['duration_s']:.0f} s, recording on; "
-          "service VmRSS every 10 s")
+    print(f"\nsoak: {r['rate']}/s offered ({r['targets']} targets) for {r['duration_s']:.0f} s, recording "
+          f"{'on' if r['recording'] else 'off'}; service VmRSS every 10 s (queued: as of the last status refresh)")
     for s in r["samples"]:
         print(f"  t={s['t_s']:>5.0f} s  rss {s['rss_mb']:8.1f} MB  queued {s['queued']}  applied {s['applied']}")
     print(f"RSS start {r['rss_start_mb']:.1f} MB, end {r['rss_end_mb']:.1f} MB, max {r['rss_max_mb']:.1f} MB, "

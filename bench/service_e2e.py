@@ -172,11 +172,12 @@ def latency_run(pub: Publisher, folder: Path, *, rate: int, recording: bool, dur
     }
 
 
-def soak_run(pub: Publisher, folder: Path, *, duration_s: float, rate: int = 10_000, every_s: float = 10.0) -> dict:
+def soak_run(pub: Publisher, folder: Path, *, duration_s: float, rate: int = 10_000, every_s: float = 10.0,
+             recording: bool = True) -> dict:
     targets = round(rate / MSGS_PER_TARGET_S)
     folder.mkdir()
     samples: list[dict[str, Any]] = []
-    with ServiceProcess(folder, recording=True) as svc:
+    with ServiceProcess(folder, recording=recording) as svc:
         pub.call("connect", svc.endpoint)
         prime(svc, pub, timeout_s=120.0)
         start_ns = time.time_ns() + 1_000_000_000
@@ -202,7 +203,8 @@ def soak_run(pub: Publisher, folder: Path, *, duration_s: float, rate: int = 10_
     late = rss[t >= 60] if (t >= 60).sum() >= 2 else rss
     c = st.counts if st else None
     return {
-        "duration_s": duration_s, "rate": rate, "targets": targets, "sent": sent["sent"], "samples": samples,
+        "duration_s": duration_s, "rate": rate, "recording": recording, "targets": targets, "sent": sent["sent"],
+        "samples": samples,
         "rss_start_mb": float(rss[0]), "rss_end_mb": end_rss, "rss_max_mb": float(rss.max()),
         "rss_min_mb": float(rss.min()), "slope_mb_per_min": slope,
         "spread_after_1min": float(late.max() / late.min() - 1),
