@@ -1,4 +1,5 @@
-"""`python -m bench [--quick] [--only core,tracker,recording]`: every benchmark, one command.
+"""`python -m bench [--quick] [--only e2e,core,tracker,recording]`: every benchmark, one command.
+`--only soak` (never in the default run): the service's memory over `--soak-s` seconds.
 
 Each benchmark measures its baselines in the same run, interleaved, and prints ratios. The
 machine's state (other processes) moves absolute figures; the ratios are the comparison.
@@ -40,7 +41,9 @@ def machine() -> dict[str, str]:
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python -m bench")
     p.add_argument("--quick", action="store_true", help="fewer repeats and sizes (~1 minute)")
-    p.add_argument("--only", default="core,tracker,recording", help="comma-separated: core, tracker, recording")
+    p.add_argument("--only", default="e2e,core,tracker,recording",
+                   help="comma-separated: e2e, core, tracker, recording; soak (not in the default)")
+    p.add_argument("--soak-s", type=float, default=600.0, help="duration of the soak (default 600 s)")
     p.add_argument("--json", type=Path, help="also write the figures to this file")
     args = p.parse_args(argv)
     from fusion.io.blas import pin_blas_threads
@@ -53,7 +56,15 @@ def main(argv: list[str] | None = None) -> int:
     for name in args.only.split(","):
         print()
         t0 = time.perf_counter()
-        if name == "core":
+        if name == "e2e":
+            from bench import service_e2e
+
+            results["e2e"] = service_e2e.run(quick=args.quick)
+        elif name == "soak":
+            from bench import service_e2e
+
+            results["soak"] = service_e2e.run_soak(duration_s=args.soak_s)
+        elif name == "core":
             from bench import core_step
 
             results["core"] = core_step.run(quick=args.quick)
