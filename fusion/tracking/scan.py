@@ -126,7 +126,8 @@ def run_scan(ts: TrackSet, key: ScanKey, dets: tuple[Detection, ...], ctx: ScanC
     hit[ti] = True
     sweep = ctx.lifecycle.sweep(ts, updated, hit, sm, t_ns)
     for ev in sweep.events:
-        tally[ev.reason] += 1  # type: ignore[index]
+        if ev.reason is not None:  # deletions, by reason (coasting events are not counted)
+            tally[ev.reason] += 1
     events.extend(sweep.events)
     after = updated.derive(counters=sweep.counters, delete=sweep.delete, born=born)
     estimates.sort(key=lambda e: e.track_id)
