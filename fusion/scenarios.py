@@ -34,7 +34,7 @@ from fusion.core.motion import ConstantVelocity, LinearModel, MotionModel
 from fusion.core.switching import rates_from_sojourn
 from fusion.core.timebase import seconds_to_ns
 from fusion.errors import ConfigError
-from fusion.models.helix import HelixDoc, HelixExact
+from fusion.models.helix import HelixDoc, HelixExact, HelixLinear
 
 REFERENCE_NAMES: tuple[str, ...] = (
     "cv1d_a",
@@ -195,9 +195,7 @@ def _helix(version: str, rng: np.random.Generator) -> Reference:
     dt, K = 1.0, 100
     pos = _helix_truth(K)
     if version == "linear":
-        c, s = np.cos(0.1), np.sin(0.1)
-        Fm = np.array([[c, -s, 0, 0], [s, c, 0, 0], [0, 0, 1, dt], [0, 0, 0, 1]])
-        motion: MotionModel = LinearModel(F=lambda dt: Fm, Q=lambda dt: 0.1 * np.eye(4), position_indices=(0, 1, 2))
+        motion: MotionModel = HelixLinear(turn_radps=0.1, q=0.1)  # at dt = 1 s the document's F and Q
         full = np.hstack([pos, np.full((K + 1, 1), 0.5)])
         truth0, truth = full[0], full[1:]
         meas = CartesianPosition(ndim_state=4, indices=(0, 1, 2), R=np.ones(3))

@@ -1,8 +1,13 @@
 r"""The helix motion models of the reference scenarios, as user-style models loadable by path
 (`fusion.models.helix:HelixExact`, `fusion.models.helix:HelixDoc`; see fusion.models.loader).
 
-Both have the 5-state layout of the source document and accept one state (5,) or a stack
-(..., 5) with dt a float or an array of the stack's leading shape.
+All accept one state or a stack (..., n) with dt a float or an array of the stack's leading
+shape.
+
+HelixLinear, state [x, y, z, vz]: the source document's linear version, linearised about the
+known circle: the x-y plane rotates by turn_radps dt, z climbs at vz.
+    F = [[c, -s, 0, 0], [s, c, 0, 0], [0, 0, 1, dt], [0, 0, 0, 1]],  Q = q I dt
+(at dt = 1 s, exactly the document's F and Q = 0.1 I).
 
 HelixExact, state [x, y, z, omega, vz]: the x-y plane rotates by omega dt exactly, z climbs at vz.
     x' = c x - s y,  y' = s x + c y   (c = cos(omega dt), s = sin(omega dt))
@@ -21,7 +26,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from fusion.core.checks import Array, as_vector
-from fusion.core.motion import MotionModel
+from fusion.core.motion import LinearMotionModel, MotionModel
 from fusion.errors import ConfigError
 
 
@@ -34,6 +39,32 @@ def _nonneg(name: str, v: float) -> float:
 
 def _shape(x: Array, dt: Array) -> tuple[int, ...]:
     return np.broadcast_shapes(x.shape[:-1], dt.shape)
+
+
+class HelixLinear(LinearMotionModel):
+    """[x, y, z, vz]: a known rotation rate in x-y, constant climb rate (see the module docstring)."""
+
+    ndim_state = 4
+    position_indices = (0, 1, 2)
+    velocity_indices = ()
+    broadcasts = True
+    state_names = ("x", "y", "z", "vz")
+
+    def __init__(self, *, turn_radps: float = 0.1, q: float = 0.1) -> None:
+        self.turn_radps = float(as_vector("turn_radps", [turn_radps], 1)[0])
+        self.q = _nonneg("q", q)
+
+    def F(self, dt_s: float | Array) -> Array:
+        dt = np.asarray(dt_s, dtype=np.float64)
+        c, s = np.cos(self.turn_radps * dt), np.sin(self.turn_radps * dt)
+        F = np.zeros(dt.shape + (4, 4))
+        F[..., 0, 0], F[..., 0, 1], F[..., 1, 0], F[..., 1, 1] = c, -s, s, c
+        F[..., 2, 2], F[..., 2, 3], F[..., 3, 3] = 1.0, dt, 1.0
+        return F
+
+    def Q_dt(self, dt_s: float | Array) -> Array:
+        dt = np.asarray(dt_s, dtype=np.float64)
+        return self.q * np.eye(4) * dt[..., None, None]
 
 
 class HelixExact(MotionModel):

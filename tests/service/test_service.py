@@ -94,7 +94,7 @@ def test_reference_scenario_end_to_end(name: str, tmp_path: Path) -> None:
     assert v.returncode == 0, v.stderr
 
 
-@pytest.mark.parametrize("name", ["cv1d_d", "helix3d_ekf", "helix3d_ekf_doc"], ids=str)
+@pytest.mark.parametrize("name", ["cv1d_d", "helix3d", "helix3d_ekf", "helix3d_ekf_doc"], ids=str)
 def test_the_service_tracks_as_well_as_the_reference_filter(name: str, tmp_path: Path) -> None:
     """Through the real service path: cv1d_d with its control input on the wire, the helix
     scenarios with the source document's 5-state models loaded by import path. Position RMSE

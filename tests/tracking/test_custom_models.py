@@ -18,7 +18,7 @@ from fusion.tracking.tracker import Tracker
 CONFIGS = Path(__file__).resolve().parents[2] / "configs" / "scenarios"
 
 
-@pytest.mark.parametrize("name", ["helix3d_ekf", "helix3d_ekf_doc"])
+@pytest.mark.parametrize("name", ["helix3d", "helix3d_ekf", "helix3d_ekf_doc"])
 def test_helix_models_by_import_path_match_the_reference_filter(name: str) -> None:
     ref = reference(name, seed=1)
     tr = Tracker(load_service_config(CONFIGS / f"{name}.toml").tracker)
