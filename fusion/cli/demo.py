@@ -88,7 +88,7 @@ def demo(args: argparse.Namespace) -> int:
     span = "the whole scenario" if args.duration is None else f"{args.duration:g} s of scenario time"
     status(args, f"demo {args.scenario}: simulating {span} ...")
     _on_interrupt(stop, out)
-    with bar(enabled=wanted(args), desc=f"demo {args.scenario}", unit="meas") as b:
+    with bar(enabled=wanted(args), desc=f"demo {args.scenario}", unit="sample") as b:
         r = run_demo(scenario=args.scenario, duration_s=args.duration, out=out, seed=args.seed, speed=args.speed,
                      stop=stop, progress=b)
     print(demo_report(r))
