@@ -83,7 +83,7 @@ def demo(args: argparse.Namespace) -> int:
     from publishers.demo import default_out, demo_report, run_demo
 
     pin_blas_threads()
-    out = args.out or default_out(args.scenario)
+    out = a.output_file(args.out or default_out(args.scenario), "recording")
     stop = threading.Event()
     span = "the whole scenario" if args.duration is None else f"{args.duration:g} s of scenario time"
     status(args, f"demo {args.scenario}: simulating {span} ...")

@@ -86,7 +86,7 @@ def replay(args: argparse.Namespace) -> int:
         _check_kind(stream, STREAM_MAGIC)
     config = None if args.config is None else a.input_file(args.config, "configuration file",
                                                            "give a service or scenario TOML")
-    out = args.out or stream.with_name(f"{stream.stem}-replay.rrd")
+    out = a.output_file(args.out or stream.with_name(f"{stream.stem}-replay.rrd"), "recording")
     from fusion.io.blas import pin_blas_threads
     from fusion.replay import replay as run_replay
 
