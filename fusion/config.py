@@ -297,6 +297,13 @@ class IntakeConfig(Section):
     max_future_wall_s: PosFloat = 3600.0  # refuse sensor times this far ahead of the wall clock
 
 
+class PublicationConfig(Section):
+    """[publication]: period_s > 0 also publishes, every period_s of stream (sensor) time, every
+    confirmed track predicted to that tick on fusion/<ns>/predicted (fusion.prediction); 0: off."""
+
+    period_s: NonNegFloat = 0.0
+
+
 class ServiceConfig(Section):
     """`fusion serve --config FILE`: everything the service needs."""
 
@@ -305,6 +312,7 @@ class ServiceConfig(Section):
     zenoh: ZenohConfig = ZenohConfig()
     recording: RecordingConfig = RecordingConfig()
     intake: IntakeConfig = IntakeConfig()
+    publication: PublicationConfig = PublicationConfig()
     publish_tentative: bool = False
     warnings_per_minute: Annotated[int, msgspec.Meta(ge=1)] = 60
 

@@ -90,3 +90,51 @@ def query(session: Any, key: str) -> bytes:
     replies = list(session.get(key, timeout=5.0))
     assert replies, f"no reply on {key}"
     return replies[0].ok.payload.to_bytes()
+
+
+class Collector:
+    """Subscribes to `key` and keeps every message received, decoded with `decode`."""
+
+    def __init__(self, session: Any, key: str, decode: Any) -> None:
+        self.got: list[Any] = []
+        self._decode = decode
+        self._lock = threading.Lock()
+        self.sub = session.declare_subscriber(key, self._cb)
+        time.sleep(0.2)  # see EstimateCollector
+
+    def _cb(self, sample: Any) -> None:
+        msg = self._decode(sample.payload.to_bytes())
+        with self._lock:
+            self.got.append(msg)
+
+    def wait_for(self, n: int, *, timeout_s: float = 5.0) -> list[Any]:
+        """Every message so far, once at least n arrived (or the timeout passed)."""
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            with self._lock:
+                if len(self.got) >= n:
+                    break
+            time.sleep(0.01)
+        with self._lock:
+            return list(self.got)
+
+
+def put_all(session: Any, samples: list[tuple[str, bytes]], *, pause_s: float = 0.0) -> None:
+    """Put (key, payload) in order, each key through a publisher the service is matched with,
+    pause_s apart."""
+    import zenoh
+
+    pubs: dict[str, Any] = {}
+    try:
+        for key, payload in samples:
+            if key not in pubs:
+                pubs[key] = session.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK)
+                deadline = time.monotonic() + 5
+                while not pubs[key].matching_status.matching and time.monotonic() < deadline:
+                    time.sleep(0.001)
+            pubs[key].put(payload)
+            if pause_s:
+                time.sleep(pause_s)
+    finally:
+        for p in pubs.values():
+            p.undeclare()
