@@ -60,7 +60,18 @@ class RadarSensorConfig(_SensorBase, tag="radar"):
     range_rate_std_mps: PosFloat | None = None
 
 
-SensorConfig = CartesianSensorConfig | RadarSensorConfig
+class CustomSensorConfig(_SensorBase, tag="custom", kw_only=True):
+    """A user's measurement model by import path, "package.module:Name" built as Name(**params)
+    and checked at load (shapes, a finite-difference Jacobian check; fusion.models.loader). Its
+    h is in the world frame, so the pose goes into its params (position_m, heading_rad, pitch_rad
+    and roll_rad are refused); its R is the noise used when a message carries none. Its z comes
+    as a `cartesian` message's pos_m (1-3 components, noise std_m or cov_m2 in z's units)."""
+
+    model: str
+    params: dict[str, float | int | list[float]] = {}
+
+
+SensorConfig = CartesianSensorConfig | RadarSensorConfig | CustomSensorConfig
 
 
 class ModeConfig(Section):
@@ -197,6 +208,9 @@ class TrackerConfig(Section):
         if self.control is not None and self.control.source_id in ids:
             raise ValueError(f"control.source_id {self.control.source_id!r} is also a sensor id")
         for s in self.sensors:
+            if isinstance(s, CustomSensorConfig) and (s.position_m or s.heading_rad or s.pitch_rad or s.roll_rad):
+                raise ValueError(f"sensor {s.id}: a custom sensor's pose cannot be applied to its model: give it in "
+                                 "params (its h is in the world frame)")
             if isinstance(s, RadarSensorConfig) and d == 1:
                 raise ValueError(f"sensor {s.id}: a radar needs a 2-D or 3-D state (motion.ndim)")
             if s.position_m and len(s.position_m) != d:
