@@ -313,9 +313,12 @@ class IntakeConfig(Section):
 
 class PublicationConfig(Section):
     """[publication]: period_s > 0 also publishes, every period_s of stream (sensor) time, every
-    confirmed track predicted to that tick on fusion/<ns>/predicted (fusion.prediction); 0: off."""
+    confirmed track predicted to that tick on fusion/<ns>/predicted (fusion.prediction); 0: off.
+    smooth_lag = L > 0 also publishes each confirmed estimate smoothed over the L estimates of
+    its track after it, x_k|k+L, on fusion/<ns>/smoothed/<track_id> (fusion.fixed_lag); 0: off."""
 
     period_s: NonNegFloat = 0.0
+    smooth_lag: Annotated[int, msgspec.Meta(ge=0, le=1000)] = 0
 
 
 class ServiceConfig(Section):

@@ -16,9 +16,14 @@ processed, every tick T with last published tick < T <= now_ns is due, and the s
 predicted to T (from the tracks as they are after that batch) is published on
 `fusion/<ns>/predicted`, in increasing T. The first tick is the first multiple at or after the
 earliest sensor time of the first batch that brought measurements (so a stream that arrives in
-one burst still gets every tick from its start). When more than `MAX_CATCH_UP` ticks are due at once (a jump of the clock), only the
-newest MAX_CATCH_UP are published and the others are counted as skipped. A replay that feeds
-the same records in the same batches publishes the same ticks with the same predictions.
+one burst still gets every tick from its start). When more than `MAX_CATCH_UP` ticks are due
+at once (a jump of the clock), only the newest MAX_CATCH_UP are published and the others are
+counted as skipped. The ticks depend only on the sensor times of the stream; the predictions
+also on how the records were batched (what the tracker held when a tick fell due): a replay
+that feeds the same records in the same batches publishes the same ticks and predictions.
+Since the stream clock trails the newest measurement, a track updated at or after a tick by the
+batch that made it due is given at that update (status "confirmed"); the tracks not updated
+since (other sensors, coasting) are the ones carried forward.
 """
 
 from __future__ import annotations

@@ -11,7 +11,8 @@ Queryables (answers prepared by the loop, so callbacks never touch the tracker):
                          with ?t_ns=T every confirmed track predicted to T (answered by the loop)
 Publications: fusion/<ns>/tracks/<id> (estimates), fusion/<ns>/events/<id> (confirmed,
 coasting, deleted with the reason, withdrawals; fusion.publication) and, with [publication]
-period_s, fusion/<ns>/predicted (fusion.prediction).
+period_s, fusion/<ns>/predicted (fusion.prediction); with smooth_lag, fusion/<ns>/smoothed/<id>
+(fusion.fixed_lag).
 Shutdown (SIGINT, SIGTERM or stop()): stop intake, drain the queue, flush and close the
 recording and the stream file, close the Zenoh session.
 """
@@ -28,6 +29,7 @@ from typing import Any
 
 from fusion import messages as m
 from fusion.config import ServiceConfig
+from fusion.fixed_lag import FixedLagSmoother, smoothed_key
 from fusion.io import wire
 from fusion.io.recording import RotatingSink
 from fusion.io.rerun_sink import RerunSink
@@ -80,6 +82,9 @@ class Service:
         period_ns = round(config.publication.period_s * 1e9)
         self.cadence = Cadence(period_ns) if period_ns > 0 else None
         self._queries: deque[tuple[Any, int]] = deque()  # snapshot?t_ns queries for the loop
+        lag = config.publication.smooth_lag
+        self.lag_smoother = FixedLagSmoother(self.tracker, lag) if lag > 0 else None
+        self.smoothed_published = 0
         self.session: Any = None
         self._decls: list[Any] = []
         self.on_publish: Callable[[Estimate], None] | None = None
@@ -197,6 +202,10 @@ class Service:
             self.session.put(m.event_key(self.ns, ev.track_id), m.encode(wire.event_message(ev)),
                              congestion_control=BLOCK)
             self.events_published += 1
+        if self.lag_smoother is not None:
+            for e in self.lag_smoother.update(out.result.estimates):
+                self.session.put(smoothed_key(self.ns, e.track_id), enc(e), congestion_control=BLOCK)
+                self.smoothed_published += 1
         if self.cadence is not None:
             first = min((p.t_ns for p in out.result.measurements), default=None)
             for t_ns in self.cadence.due(self.tracker.now_ns, first):

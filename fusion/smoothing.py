@@ -22,6 +22,7 @@ position lies within a squared Mahalanobis distance MATCH_D2 of the filtered est
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -90,11 +91,11 @@ class Smoothed:
     failed: tuple[tuple[int, str], ...]  # (track id, why) of tracks the smoother could not run on
 
 
-def _smooth_one(hist: list[Estimate], tracker: Tracker) -> tuple[Array, Array]:
+def track_predictions(hist: Sequence[Estimate], tracker: Tracker) -> tuple[Array, Array, Array, Array, Array]:
+    """x_filt, P_filt and the smoother's x_pred, P_pred, F of one track's estimates (in scan
+    order) under the tracker's motion model (see the module docstring)."""
     x = np.stack([e.x for e in hist])
     P = np.stack([e.P for e in hist])
-    if len(hist) == 1:
-        return x, P
     filters = getattr(tracker.filter, "filters", None)
     if filters is not None:
         mu = np.stack([np.asarray(e.mode_probabilities, dtype=np.float64) for e in hist])
@@ -105,7 +106,13 @@ def _smooth_one(hist: list[Estimate], tracker: Tracker) -> tuple[Array, Array]:
             for k, e in enumerate(hist[1:], start=1):
                 if e.prior_x is not None:
                     x_pred[k] = e.prior_x
-    return rts_smooth(x, P, x_pred, P_pred, F)
+    return x, P, x_pred, P_pred, F
+
+
+def _smooth_one(hist: list[Estimate], tracker: Tracker) -> tuple[Array, Array]:
+    if len(hist) == 1:
+        return hist[0].x[None], hist[0].P[None]
+    return rts_smooth(*track_predictions(hist, tracker))
 
 
 def _match(truth: dict[int, dict[str, Array]], t_ns: int, x: Array, P: Array, pi: list[int]) -> Array | None:

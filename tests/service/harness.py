@@ -67,6 +67,13 @@ class EstimateCollector:
         with self._lock:
             return list(self.got)
 
+    def all_of(self, svc: Service, *, timeout_s: float = 5.0) -> list[m.Estimate]:
+        """Every estimate, once as many arrived as `svc` published (or the timeout passed)."""
+        deadline = time.monotonic() + timeout_s
+        while len(self.snapshot()) < svc.published and time.monotonic() < deadline:
+            time.sleep(0.01)
+        return self.snapshot()
+
 
 def latest(estimates: list[m.Estimate], *, keep_revision: bool = True) -> dict[tuple[int, int, str], m.Estimate]:
     """The consumer's view: latest revision per (track, time, sensor); retractions remove.
@@ -84,6 +91,19 @@ def latest(estimates: list[m.Estimate], *, keep_revision: bool = True) -> dict[t
     if not keep_revision:
         out = {k: msgspec.structs.replace(e, revision=0) for k, e in out.items()}
     return out
+
+
+def rrd_rows(path: Path) -> dict[str, int]:
+    """Rows per entity of a recording (static rows not counted)."""
+    from collections import Counter
+
+    from rerun.chunk import RrdReader
+
+    rows: Counter[str] = Counter()
+    for ch in RrdReader(str(path)).stream():
+        if not ch.is_static:
+            rows[ch.entity_path] += ch.to_record_batch().num_rows
+    return rows
 
 
 def query(session: Any, key: str) -> bytes:

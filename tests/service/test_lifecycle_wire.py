@@ -4,8 +4,8 @@ snapshots, Cartesian sensor poses, the configured noise as the default R."""
 
 from __future__ import annotations
 
+import itertools
 import math
-import time
 from pathlib import Path
 
 import numpy as np
@@ -168,7 +168,7 @@ def test_periodic_predicted_snapshots_on_the_stream_clock(tmp_path: Path) -> Non
             if a and e.status == "predicted" and tick > 2_000_000_000:
                 a_predicted.append((tick, e.state[0], P[0, 0]))
     assert [t for t, _, _ in a_predicted] == [k * 500_000_000 for k in range(5, len(got) + 1)]
-    assert all(v1 < v2 for (_, _, v1), (_, _, v2) in zip(a_predicted, a_predicted[1:])), "uncertainty grows"
+    assert all(v1 < v2 for (_, _, v1), (_, _, v2) in itertools.pairwise(a_predicted)), "uncertainty grows"
 
 
 def _first_estimates(cfg: ServiceConfig, tmp: Path, samples: list[tuple[str, bytes]]) -> list[m.Estimate]:
@@ -179,10 +179,7 @@ def _first_estimates(cfg: ServiceConfig, tmp: Path, samples: list[tuple[str, byt
             col = EstimateCollector(s, NS)
             put_all(s, samples)
             assert svc.wait_idle(timeout_s=30.0)
-            deadline = time.monotonic() + 5.0
-            while len(col.snapshot()) < svc.published and time.monotonic() < deadline:
-                time.sleep(0.01)
-            got = col.snapshot()
+            got = col.all_of(svc)
         finally:
             s.close()
     return sorted(latest(got).values(), key=lambda e: (e.t_ns, e.track_id))

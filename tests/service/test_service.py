@@ -24,7 +24,16 @@ from fusion.scenarios import REFERENCE_NAMES
 from fusion.tracking.tracker import Tracker
 from publishers.publish import publish
 from publishers.stream import build_stream
-from tests.service.harness import EstimateCollector, client, latest, query, running_service, scenario_config
+from tests.service.harness import (
+    EstimateCollector,
+    client,
+    latest,
+    put_all,
+    query,
+    rrd_rows,
+    running_service,
+    scenario_config,
+)
 
 RERUN = Path(__import__("rerun_cli").__file__).parent / "rerun"
 
@@ -55,10 +64,7 @@ def _run_live(name: str, tmp: Path, *, duration_s: float | None = None, speed: f
             finally:
                 pub_session.close()
             assert svc.wait_idle(timeout_s=60.0)
-            deadline = time.monotonic() + 5.0
-            while len(col.snapshot()) < svc.published and time.monotonic() < deadline:
-                time.sleep(0.01)
-            got = col.snapshot()
+            got = col.all_of(svc)
         finally:
             sub_session.close()
     return cfg, samples, counts, got, svc
@@ -81,7 +87,7 @@ def test_reference_scenario_end_to_end(name: str, tmp_path: Path) -> None:
     confirmed = {e.track_id for e in got if e.status == "confirmed"}
     assert len(confirmed) == 1, f"one target, {len(confirmed)} confirmed tracks"
     # the service's recording holds every estimate it published, with covariance, NIS and truth
-    rows = _rrd_rows(tmp_path / "live.rrd")
+    rows = rrd_rows(tmp_path / "live.rrd")
     (tid,) = confirmed
     n = sum(1 for e in got if e.track_id == tid and e.status == "confirmed")
     for entity in (f"/world/tracks/{tid}", f"/world/tracks/{tid}/cov", f"/tracks/{tid}/state", f"/tracks/{tid}/std"):
@@ -117,18 +123,6 @@ def test_the_service_tracks_as_well_as_the_reference_filter(name: str, tmp_path:
     ks = [k for k, _ in rows]
     rmse_ref = float(np.sqrt(np.mean(np.sum((off.x[ks][:, idx] - ref.truth[ks][:, idx]) ** 2, axis=1))))
     assert rmse < 1.1 * rmse_ref, (rmse, rmse_ref)
-
-
-def _rrd_rows(path: Path) -> dict[str, int]:
-    from collections import Counter
-
-    from rerun.chunk import RrdReader
-
-    rows: Counter[str] = Counter()
-    for ch in RrdReader(str(path)).stream():
-        if not ch.is_static:
-            rows[ch.entity_path] += ch.to_record_batch().num_rows
-    return rows
 
 
 def test_replay_equals_live_and_is_deterministic(tmp_path: Path) -> None:
@@ -203,19 +197,10 @@ def test_good_and_bad_input(tmp_path: Path) -> None:
     cam = [s for s in cfg.tracker.sensors if s.id == GOOD_SENSOR]
     cfg = msgspec.structs.replace(cfg, tracker=msgspec.structs.replace(cfg.tracker, sensors=cam))
     stream, bad_counts, n_good = _good_and_bad(cfg.namespace)
-    import zenoh
-
     with running_service(cfg, tmp_path) as (svc, endpoint):
         s = client(endpoint)
         try:
-            pubs = {}
-            for key, payload in stream:
-                if key not in pubs:
-                    pubs[key] = s.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK)
-                    deadline = time.monotonic() + 5
-                    while not pubs[key].matching_status.matching and time.monotonic() < deadline:
-                        time.sleep(0.001)
-                pubs[key].put(payload)
+            put_all(s, stream)
             assert svc.wait_idle(timeout_s=60.0)
             status = m.decode_status(query(s, m.status_key(cfg.namespace)))
         finally:

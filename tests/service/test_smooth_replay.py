@@ -8,9 +8,9 @@ import os
 import re
 import subprocess
 import sys
-from collections import Counter
 from pathlib import Path
 
+import msgspec
 import numpy as np
 import pytest
 
@@ -21,33 +21,26 @@ from fusion.smoothing import Histories, smooth
 from fusion.tracking.tracker import Tracker
 from publishers.publish import publish
 from publishers.stream import build_stream
-from tests.service.harness import client, running_service, scenario_config
+from tests.service.harness import client, rrd_rows, running_service, scenario_config
 
 ROOT = Path(__file__).resolve().parents[2]
 RERUN = Path(__import__("rerun_cli").__file__).parent / "rerun"
 
 
-def _live_stream(name: str, tmp: Path) -> Path:
+def _live_stream(name: str, tmp: Path, *, duration_s: float | None = None, speed: float = 0.0) -> Path:
+    """The scenario through the live service; the .fstream it recorded."""
     spec, cfg = scenario_config(name)
+    if duration_s is not None:
+        spec = msgspec.structs.replace(spec, duration_s=duration_s)
     samples, _ = build_stream(spec, namespace=cfg.namespace)
     with running_service(cfg, tmp) as (svc, endpoint):
         s = client(endpoint)
         try:
-            publish(s, samples, speed=0.0, match_timeout_s=5.0)
+            publish(s, samples, speed=speed, match_timeout_s=5.0)
             assert svc.wait_idle(timeout_s=60.0)
         finally:
             s.close()
     return tmp / "live.fstream"
-
-
-def _rows(path: Path) -> dict[str, int]:
-    from rerun.chunk import RrdReader
-
-    rows: Counter[str] = Counter()
-    for ch in RrdReader(str(path)).stream():
-        if not ch.is_static:
-            rows[ch.entity_path] += ch.to_record_batch().num_rows
-    return rows
 
 
 @pytest.mark.parametrize("name", ["maneuver2d", "radar2d"], ids=str)
@@ -63,7 +56,7 @@ def test_replay_smooth_records_smoothed_tracks_below_the_filtered_error(name: st
     filtered, smoothed = float(m[1]), float(m[2])
     # measured: maneuver2d (IMM) 0.064 -> 0.037 m, radar2d (CV) 4.48 -> 1.62 m
     assert smoothed < 0.75 * filtered, r.stdout
-    rows = _rows(out)
+    rows = rrd_rows(out)
     (tid,) = {e.split("/")[2] for e in rows if e.endswith("/smoothed/state")}
     n = rows[f"/tracks/{tid}/state"]
     assert n > 150
@@ -76,19 +69,8 @@ def test_replay_smooth_records_smoothed_tracks_below_the_filtered_error(name: st
 def test_smoothing_depends_on_the_final_revisions_only(tmp_path: Path) -> None:
     """The mix with late measurements: fed record by record (replays, revisions, retractions)
     or all at once, the smoothed tracks are the same."""
-    spec, cfg = scenario_config("mix")
-    import msgspec
-
-    spec = msgspec.structs.replace(spec, duration_s=8.0)
-    samples, _ = build_stream(spec, namespace=cfg.namespace)
-    with running_service(cfg, tmp_path) as (svc, endpoint):
-        s = client(endpoint)
-        try:
-            publish(s, samples, speed=20.0, match_timeout_s=5.0)
-            assert svc.wait_idle(timeout_s=60.0)
-        finally:
-            s.close()
-    records = list(StreamReader(tmp_path / "live.fstream"))
+    _, cfg = scenario_config("mix")
+    records = list(StreamReader(_live_stream("mix", tmp_path, duration_s=8.0, speed=20.0)))
 
     def smoothed(batch: int):
         tracker = Tracker(cfg.tracker)
