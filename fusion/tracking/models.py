@@ -124,7 +124,8 @@ class SensorModel:
         """Measured points (k, d) in world coordinates of measurements Z (k, m) with noise R
         (k, m, m) of one dimension, and a per-axis variance bounding each point's spread:
         Rot R Rot' on the diagonal for a position sensor; for a radar the largest spread,
-        R_range + r^2 (R_bearing (+ R_elevation)), on every axis."""
+        R_range + r^2 (R_bearing (+ R_elevation)), on every axis; for a custom model the
+        diagonal of its position_cov(z, R), point by point."""
         model = self.by_dim[Z.shape[1]]
         if isinstance(self.config, CustomSensorConfig):  # one by one, the variance from position_cov
             P = np.stack([np.asarray(model.position(z), dtype=np.float64) for z in Z])
@@ -196,7 +197,8 @@ def custom_sensor(s: CustomSensorConfig, n: int, d: int) -> MeasurementModel:
         raise ConfigError(f"{where} has ndim_state {model.ndim_state}; the tracker's state has {n} components")
     if model.ndim_meas > 3:
         raise ConfigError(f"{where} has ndim_meas {model.ndim_meas}; the wire carries 1-3 components (pos_m)")
-    p = np.asarray(model.position(model.h(np.zeros(n))), dtype=np.float64)
+    x = 10.0 * np.random.default_rng(0).standard_normal(n)  # the loader's first check state
+    p = np.asarray(model.position(model.h(x)), dtype=np.float64)
     if p.shape != (d,):
         raise ConfigError(f"{where}: position(z) must give a {d}-D world point, got shape {p.shape}")
     return model
