@@ -40,6 +40,34 @@ def running_service(cfg: ServiceConfig, tmp: Path) -> Iterator[tuple[Service, st
         assert not t.is_alive(), "the service did not stop"
 
 
+def run_live(name: str, tmp: Path, *, duration_s: float | None = None, speed: float = 0.0
+             ) -> tuple[ServiceConfig, list[Any], dict[str, int], list[m.Estimate], Service]:
+    """The scenario through the live service, a subscriber collecting the estimates: (service
+    config, samples, publisher counts, estimates received, the stopped service). The service's
+    stream file is tmp/live.fstream, its recording tmp/live.rrd."""
+    from publishers.publish import publish
+    from publishers.stream import build_stream
+
+    spec, cfg = scenario_config(name)
+    if duration_s is not None:
+        spec = msgspec.structs.replace(spec, duration_s=duration_s)
+    samples, _ = build_stream(spec, namespace=cfg.namespace)
+    with running_service(cfg, tmp) as (svc, endpoint):
+        sub_session = client(endpoint)
+        try:
+            col = EstimateCollector(sub_session, cfg.namespace)
+            pub_session = client(endpoint)
+            try:
+                counts = publish(pub_session, samples, speed=speed, match_timeout_s=5.0)
+            finally:
+                pub_session.close()
+            assert svc.wait_idle(timeout_s=60.0)
+            got = col.all_of(svc)
+        finally:
+            sub_session.close()
+    return cfg, samples, counts, got, svc
+
+
 def client(endpoint: str) -> Any:
     import zenoh
 

@@ -25,12 +25,12 @@ from fusion.tracking.tracker import Tracker
 from publishers.publish import publish
 from publishers.stream import build_stream
 from tests.service.harness import (
-    EstimateCollector,
     client,
     latest,
     put_all,
     query,
     rrd_rows,
+    run_live,
     running_service,
     scenario_config,
 )
@@ -49,30 +49,9 @@ def _offline(cfg, stream: Path) -> list[m.Estimate]:
     return out
 
 
-def _run_live(name: str, tmp: Path, *, duration_s: float | None = None, speed: float = 0.0):
-    spec, cfg = scenario_config(name)
-    if duration_s is not None:
-        spec = msgspec.structs.replace(spec, duration_s=duration_s)
-    samples, _ = build_stream(spec, namespace=cfg.namespace)
-    with running_service(cfg, tmp) as (svc, endpoint):
-        sub_session = client(endpoint)
-        try:
-            col = EstimateCollector(sub_session, cfg.namespace)
-            pub_session = client(endpoint)
-            try:
-                counts = publish(pub_session, samples, speed=speed, match_timeout_s=5.0)
-            finally:
-                pub_session.close()
-            assert svc.wait_idle(timeout_s=60.0)
-            got = col.all_of(svc)
-        finally:
-            sub_session.close()
-    return cfg, samples, counts, got, svc
-
-
 @pytest.mark.parametrize("name", REFERENCE_NAMES, ids=str)
 def test_reference_scenario_end_to_end(name: str, tmp_path: Path) -> None:
-    cfg, samples, counts, got, svc = _run_live(name, tmp_path)
+    cfg, samples, counts, got, svc = run_live(name, tmp_path)
     n_meas = sum(1 for s in samples if "/meas/" in s.key)
     assert counts["meas"] == n_meas
     assert len(got) == svc.published > 0, "estimates published and received differ"
@@ -108,7 +87,7 @@ def test_the_service_tracks_as_well_as_the_reference_filter(name: str, tmp_path:
     from fusion.scenarios import reference, run_reference
 
     spec, _ = scenario_config(name)
-    _, _, _, got, svc = _run_live(name, tmp_path)
+    _, _, _, got, svc = run_live(name, tmp_path)
     if name == "cv1d_d":
         assert svc.status_dict()["counts"]["applied"] == 100 and svc.tracker.counts.inputs == 100
     ref = reference(name, seed=spec.seed)
@@ -127,7 +106,7 @@ def test_the_service_tracks_as_well_as_the_reference_filter(name: str, tmp_path:
 
 def test_replay_equals_live_and_is_deterministic(tmp_path: Path) -> None:
     # 20x real time: small batches, so jittered arrivals reach the tracker late and force replays
-    _, _, _, got, svc = _run_live("mix", tmp_path, duration_s=8.0, speed=20.0)
+    _, _, _, got, svc = run_live("mix", tmp_path, duration_s=8.0, speed=20.0)
     assert svc.tracker.counts.late_applied > 0, "the mix should deliver late measurements"
     stream = tmp_path / "live.fstream"
     est_a, est_b = tmp_path / "a.jsonl", tmp_path / "b.jsonl"

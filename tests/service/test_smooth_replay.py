@@ -10,7 +10,6 @@ import subprocess
 import sys
 from pathlib import Path
 
-import msgspec
 import numpy as np
 import pytest
 
@@ -19,9 +18,7 @@ from fusion.io.streamfile import StreamReader
 from fusion.pipeline import Pipeline
 from fusion.smoothing import Histories, smooth
 from fusion.tracking.tracker import Tracker
-from publishers.publish import publish
-from publishers.stream import build_stream
-from tests.service.harness import client, rrd_rows, running_service, scenario_config
+from tests.service.harness import rrd_rows, run_live, scenario_config
 
 ROOT = Path(__file__).resolve().parents[2]
 RERUN = Path(__import__("rerun_cli").__file__).parent / "rerun"
@@ -29,17 +26,7 @@ RERUN = Path(__import__("rerun_cli").__file__).parent / "rerun"
 
 def _live_stream(name: str, tmp: Path, *, duration_s: float | None = None, speed: float = 0.0) -> Path:
     """The scenario through the live service; the .fstream it recorded."""
-    spec, cfg = scenario_config(name)
-    if duration_s is not None:
-        spec = msgspec.structs.replace(spec, duration_s=duration_s)
-    samples, _ = build_stream(spec, namespace=cfg.namespace)
-    with running_service(cfg, tmp) as (svc, endpoint):
-        s = client(endpoint)
-        try:
-            publish(s, samples, speed=speed, match_timeout_s=5.0)
-            assert svc.wait_idle(timeout_s=60.0)
-        finally:
-            s.close()
+    run_live(name, tmp, duration_s=duration_s, speed=speed)
     return tmp / "live.fstream"
 
 
