@@ -7,7 +7,12 @@ wake the loop; the thread that calls `run` owns the tracker and does everything 
 
 Queryables (answers prepared by the loop, so callbacks never touch the tracker):
   fusion/<ns>/status     ServiceStatus (msgpack)
-  fusion/<ns>/snapshot   the latest estimate of every confirmed track (msgpack list)
+  fusion/<ns>/snapshot   the latest estimate of every confirmed track (msgpack list);
+                         with ?t_ns=T every confirmed track predicted to T (answered by the loop)
+Publications: fusion/<ns>/tracks/<id> (estimates), fusion/<ns>/events/<id> (confirmed,
+coasting, deleted with the reason, withdrawals; fusion.publication) and, with [publication]
+period_s, fusion/<ns>/predicted (fusion.prediction); with smooth_lag, fusion/<ns>/smoothed/<id>
+(fusion.fixed_lag).
 Shutdown (SIGINT, SIGTERM or stop()): stop intake, drain the queue, flush and close the
 recording and the stream file, close the Zenoh session.
 """
@@ -22,12 +27,15 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from fusion import messages as m
 from fusion.config import ServiceConfig
+from fusion.fixed_lag import FixedLagSmoother, smoothed_key
 from fusion.io import wire
 from fusion.io.recording import RotatingSink
 from fusion.io.rerun_sink import RerunSink
 from fusion.io.zenoh_bus import zenoh_session_config
 from fusion.pipeline import Pipeline, Record
+from fusion.prediction import Cadence, encode_predicted, predicted_key, snapshot_time
 from fusion.tracking.detection import Reason
 from fusion.tracking.results import Estimate
 from fusion.tracking.tracker import Tracker
@@ -69,6 +77,14 @@ class Service:
         self._snapshot_payload = b""
         self._status_at = 0.0
         self.published = 0
+        self.events_published = 0
+        self.predicted_published = 0  # periodic predicted snapshots
+        period_ns = round(config.publication.period_s * 1e9)
+        self.cadence = Cadence(period_ns) if period_ns > 0 else None
+        self._queries: deque[tuple[Any, int]] = deque()  # snapshot?t_ns queries for the loop
+        lag = config.publication.smooth_lag
+        self.lag_smoother = FixedLagSmoother(self.tracker, lag) if lag > 0 else None
+        self.smoothed_published = 0
         self.session: Any = None
         self._decls: list[Any] = []
         self.on_publish: Callable[[Estimate], None] | None = None
@@ -87,7 +103,25 @@ class Service:
         query.reply(wire.status_key(self.ns), self._status_payload)
 
     def _on_snapshot(self, query: Any) -> None:
-        query.reply(wire.snapshot_key(self.ns), self._snapshot_payload)
+        try:
+            t_ns = snapshot_time(query.parameters)
+        except ValueError as e:
+            query.reply_err(str(e))
+            return
+        if t_ns is None:
+            query.reply(wire.snapshot_key(self.ns), self._snapshot_payload)
+            return
+        self._queries.append((query, t_ns))  # the loop owns the tracker: it answers
+        self._wake.set()
+
+    def _answer_queries(self) -> None:
+        """Answer the snapshot?t_ns queries waiting (tracker thread)."""
+        while self._queries:
+            query, t_ns = self._queries.popleft()
+            try:
+                query.reply(wire.snapshot_key(self.ns), encode_predicted(self.tracker, t_ns))
+            finally:
+                query.drop()
 
     def _open_outputs(self) -> None:
         """Create the recording and the stream file (only once the session is open, so that a
@@ -164,6 +198,20 @@ class Service:
             self.published += 1
             if self.on_publish is not None:
                 self.on_publish(e)
+        for ev in out.events_to_publish:
+            self.session.put(m.event_key(self.ns, ev.track_id), m.encode(wire.event_message(ev)),
+                             congestion_control=BLOCK)
+            self.events_published += 1
+        if self.lag_smoother is not None:
+            for e in self.lag_smoother.update(out.result.estimates):
+                self.session.put(smoothed_key(self.ns, e.track_id), enc(e), congestion_control=BLOCK)
+                self.smoothed_published += 1
+        if self.cadence is not None:
+            first = min((p.t_ns for p in out.result.measurements), default=None)
+            for t_ns in self.cadence.due(self.tracker.now_ns, first):
+                self.session.put(predicted_key(self.ns), encode_predicted(self.tracker, t_ns),
+                                 congestion_control=BLOCK)
+                self.predicted_published += 1
 
     def run(self, *, duration_s: float | None = None) -> int:
         """Process until stop() (or a signal handler calling it) or `duration_s`; then shut down."""
@@ -184,6 +232,7 @@ class Service:
                 else:
                     self._wake.wait(0.05)
                     self._wake.clear()
+                self._answer_queries()
                 if self.sink is not None:
                     self.sink.maybe_flush()
                 self._refresh_status()
@@ -200,6 +249,7 @@ class Service:
         while self._q:
             self._step(self._drain(self.config.intake.batch_max))
         self._refresh_status(force=True)
+        self._answer_queries()
         for d in self._decls[3:]:
             d.undeclare()
         self._decls = []

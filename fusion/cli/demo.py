@@ -25,7 +25,7 @@ aborts at once."""
 
 EXAMPLES = """\
 examples:
-  fusion demo                                  # mix, 30 s of scenario time at 10x
+  fusion demo                                  # mix, the whole scenario (60 s) at 10x
   fusion demo -s radar2d --speed max           # a reference scenario, as fast as possible
   fusion demo -s mix --duration 300 --speed max -o /tmp/long.rrd --seed 7"""
 

@@ -93,7 +93,8 @@ def test_missing_or_wrong_files(case: str, tmp_path: Path) -> None:
     ('namspace = "x"\n' + GOOD_SENSORS,
      r"bad\.toml:1: namspace: unknown key 'namspace'; did you mean 'namespace'\? \(keys here: tracker, namespace"),
     (GOOD_SENSORS + '[[tracker.sensors]]\nid = "r"\nkind = "radr"\n',
-     r"bad\.toml:7: tracker\.sensors\[1\]\.kind: 'radr' is not one of 'cartesian', 'radar'; did you mean 'radar'\?"),
+     r"bad\.toml:7: tracker\.sensors\[1\]\.kind: 'radr' is not one of 'cartesian', 'radar', 'custom'; "
+     r"did you mean 'radar'\?"),
     (GOOD_SENSORS + "[tracker.gate]\nprobability = 2.0\n",
      r"bad\.toml:6: tracker\.gate\.probability: Expected float < 1\.0, got 2\.0"),
     ('namespace = "x"\n', r"bad\.toml: required key 'tracker' is missing"),
