@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 from fusion import messages as m
@@ -19,6 +19,7 @@ from fusion.io import wire
 from fusion.io.rerun_sink import RerunSink
 from fusion.io.streamfile import read_records
 from fusion.pipeline import Pipeline
+from fusion.tracking.results import Counts
 from fusion.tracking.tracker import Tracker
 
 CONFIGS = Path(__file__).resolve().parent.parent / "configs"
@@ -28,7 +29,7 @@ CONFIGS = Path(__file__).resolve().parent.parent / "configs"
 class ReplayCounts:
     records: int
     estimates: int
-    counts: dict[str, int] = field(default_factory=dict)  # the pipeline's counts (applied, duplicates, ...)
+    counts: Counts  # the pipeline's counts (applied, refused by reason, ...)
 
 
 def _config_for(path: Path | None, namespace: str) -> ServiceConfig:
@@ -91,4 +92,4 @@ def replay(stream: str | Path, *, config: str | Path | None = None, out: str | P
             est_file.close()
         if sink is not None:
             sink.close()
-    return ReplayCounts(len(all_records), n_est, pipe.counts().flat())
+    return ReplayCounts(len(all_records), n_est, pipe.counts())
