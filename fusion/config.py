@@ -84,21 +84,27 @@ class ModeConfig(Section):
     sojourn_s: PosFloat = 10.0
 
 
+ACCEL_PSD_DEFAULT = 1.0
+
+
 class MotionConfig(Section):
     """The motion model of every track.
 
     model: "cv" constant velocity, "ca" constant acceleration, "ct" coordinated turn (2-D),
     "imm" an interacting multiple model over `modes`, "custom" a user's model given by import
     path (`custom`, `params`): checked at load (shapes, a finite-difference Jacobian check).
-    accel_psd_m2s3: power spectral density of the white acceleration noise (m^2/s^3), q^2 in
-    Q_axis = q^2 [[dt^3/3, dt^2/2], [dt^2/2, dt]]; for "ca" it is the jerk density (m^2/s^5).
+    accel_psd_m2s3: power spectral density of the white acceleration noise of "cv" and "ct"
+    (m^2/s^3), q^2 in Q_axis = q^2 [[dt^3/3, dt^2/2], [dt^2/2, dt]].
+    jerk_psd_m2s5: "ca" only, and needed there: the density of its white jerk noise (m^2/s^5),
+    q^2 in Q_axis = q^2 [[dt^5/20, dt^4/8, dt^3/6], [dt^4/8, dt^3/3, dt^2/2], [dt^3/6, dt^2/2, dt]].
     turn_psd_rad2s3: density of the white turn-rate noise of "ct" (rad^2/s^3).
     filter: "ekf" (exact KF on linear models) or "ukf".
     """
 
     model: Literal["cv", "ca", "ct", "imm", "custom"] = "cv"
     ndim: Literal[1, 2, 3] = 2
-    accel_psd_m2s3: NonNegFloat = 1.0
+    accel_psd_m2s3: NonNegFloat = ACCEL_PSD_DEFAULT
+    jerk_psd_m2s5: NonNegFloat | None = None
     turn_psd_rad2s3: NonNegFloat = 1e-4
     modes: list[ModeConfig] = []
     filter: Literal["ekf", "ukf"] = "ekf"
@@ -195,6 +201,11 @@ class TrackerConfig(Section):
         m, d = self.motion, self.motion.ndim
         if (m.model == "ct" or any(x.model == "ct" for x in m.modes)) and d != 2:
             raise ValueError("the coordinated-turn model is 2-D: set motion.ndim = 2")
+        if m.model == "ca" and (m.jerk_psd_m2s5 is None or m.accel_psd_m2s3 != ACCEL_PSD_DEFAULT):
+            raise ValueError("motion.model = 'ca' takes its noise as motion.jerk_psd_m2s5 (m^2/s^5, the white "
+                             "jerk's density), not accel_psd_m2s3 (the acceleration noise of 'cv' and 'ct')")
+        if m.model != "ca" and m.jerk_psd_m2s5 is not None:
+            raise ValueError(f"motion.jerk_psd_m2s5 is the noise of model 'ca'; model {m.model!r} takes accel_psd_m2s3")
         if m.model == "imm" and len(m.modes) < 2:
             raise ValueError("motion.model = 'imm' needs at least two [[motion.modes]]")
         if m.model != "imm" and m.modes:

@@ -232,6 +232,16 @@ _dec_any = msgspec.msgpack.Decoder(Message)
 _json_any = msgspec.json.Decoder(Message)
 
 
+class _Versioned(msgspec.Struct):
+    """Any message's schema version, the rest of it ignored (a sender without `v` speaks 1)."""
+
+    v: int = 1
+
+
+_version_of = {msgspec.msgpack.Decoder: msgspec.msgpack.Decoder(_Versioned),
+               msgspec.json.Decoder: msgspec.json.Decoder(_Versioned)}
+
+
 def encode(msg: Message) -> bytes:
     """msgpack bytes of a message."""
     return _enc.encode(msg)
@@ -246,13 +256,23 @@ def _decode(dec: msgspec.msgpack.Decoder | msgspec.json.Decoder, data: bytes | s
     try:
         return dec.decode(data)
     except msgspec.ValidationError as e:
-        if str(e).endswith("at `$.v`"):
+        v = _version(dec, data)
+        if v is not None and v != SCHEMA_VERSION:
             raise UnsupportedVersionError(f"{what} of an unsupported schema version ({e}); this service reads "
                                           f"version {SCHEMA_VERSION}: upgrade it or the sender") from None
         raise InvalidMessageError(f"invalid {what}: {e}") from None
     except (msgspec.DecodeError, UnicodeDecodeError, ValueError, OverflowError) as e:
         # msgspec raises UnicodeDecodeError for invalid UTF-8 in a string, not DecodeError
         raise MalformedMessageError(f"malformed {what}: {type(e).__name__}: {e}") from None
+
+
+def _version(dec: msgspec.msgpack.Decoder | msgspec.json.Decoder, data: bytes | str) -> int | None:
+    """The schema version a message that failed validation says it has (None: no integer `v`
+    in an object; such a message is invalid, whatever its version)."""
+    try:
+        return _version_of[type(dec)].decode(data).v
+    except msgspec.DecodeError:  # ValidationError included: a `v` that is not an integer
+        return None
 
 
 def decode_measurement(data: bytes) -> Measurement:

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 from fusion import messages as m
@@ -28,6 +28,7 @@ from fusion.io.streamfile import read_records
 from fusion.pipeline import Pipeline
 from fusion.smoothing import Histories, position_rmse
 from fusion.smoothing import smooth as smooth_tracks
+from fusion.tracking.results import Counts
 from fusion.tracking.tracker import Tracker
 
 CONFIGS = Path(__file__).resolve().parent.parent / "configs"
@@ -37,7 +38,7 @@ CONFIGS = Path(__file__).resolve().parent.parent / "configs"
 class ReplayCounts:
     records: int
     estimates: int
-    counts: dict[str, int] = field(default_factory=dict)  # the pipeline's counts (applied, duplicates, ...)
+    counts: Counts  # the pipeline's counts (applied, refused by reason, ...)
     smoothed_tracks: int = 0  # with smooth=True
     smoothing_failed: tuple[tuple[int, str], ...] = ()  # (track id, why)
     rmse_filtered_m: float | None = None  # position RMSE vs truth, over the smoothed tracks' matched rows
@@ -115,6 +116,6 @@ def replay(stream: str | Path, *, config: str | Path | None = None, out: str | P
         if sink is not None:
             sink.close()
     if sm is None:
-        return ReplayCounts(len(all_records), n_est, pipe.counts().flat())
+        return ReplayCounts(len(all_records), n_est, pipe.counts())
     rf, rs = position_rmse(sm.tracks, tracker.position_indices)
-    return ReplayCounts(len(all_records), n_est, pipe.counts().flat(), len(sm.tracks), sm.failed, rf, rs)
+    return ReplayCounts(len(all_records), n_est, pipe.counts(), len(sm.tracks), sm.failed, rf, rs)

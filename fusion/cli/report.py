@@ -9,6 +9,8 @@ from collections.abc import Mapping
 from typing import Any
 
 from fusion import messages as m
+from fusion.tracking.detection import Reason
+from fusion.tracking.results import Counts
 
 
 def counts_line(c: Mapping[str, Any]) -> str:
@@ -28,14 +30,12 @@ def counts_line(c: Mapping[str, Any]) -> str:
     return line + f"; published {c['published']} estimates"
 
 
-def flat_counts(c: Mapping[str, int], *, published: int) -> dict[str, Any]:
-    """A pipeline's flat counts (fusion.tracking.results.Counts.flat: "refused/<reason>" keys,
-    duplicates as "refused/duplicate") in the shape counts_line reads."""
-    refused = {k[len("refused/"):]: v for k, v in sorted(c.items()) if k.startswith("refused/") and v}
-    duplicates = refused.pop("duplicate", 0)
-    return {"received": c.get("received", 0), "applied": c.get("applied", 0), "duplicates": duplicates,
-            "refused": refused, "truth": c.get("truth", 0), "late_applied": c.get("late_applied", 0),
-            "replays": c.get("replays", 0), "published": published}
+def flat_counts(c: Counts, *, published: int) -> dict[str, Any]:
+    """A pipeline's counts (fusion.tracking.results.Counts) in the shape counts_line reads:
+    duplicates apart from the other refusals, reasons that did not happen left out."""
+    refused = {r.value: n for r, n in sorted(c.refused.items()) if n and r != Reason.DUPLICATE}
+    return {"received": c.received, "applied": c.applied, "duplicates": c.duplicates, "refused": refused,
+            "truth": c.truth, "late_applied": c.late_applied, "replays": c.replays, "published": published}
 
 
 def size(n_bytes: int) -> str:

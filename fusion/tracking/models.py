@@ -39,7 +39,8 @@ def motion_model(cfg: MotionConfig, *, control: bool = False) -> MotionModel:
     if cfg.model == "cv":
         return ConstantVelocity(ndim=cfg.ndim, q=_q(cfg.accel_psd_m2s3), with_control=control)
     if cfg.model == "ca":
-        return ConstantAcceleration(ndim=cfg.ndim, q=_q(cfg.accel_psd_m2s3))
+        assert cfg.jerk_psd_m2s5 is not None  # required for "ca" (TrackerConfig checks)
+        return ConstantAcceleration(ndim=cfg.ndim, q=_q(cfg.jerk_psd_m2s5))
     if cfg.model == "ct":
         return CoordinatedTurn(q_accel=_q(cfg.accel_psd_m2s3), q_turn=_q(cfg.turn_psd_rad2s3))
     if cfg.model == "custom":
