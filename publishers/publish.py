@@ -20,6 +20,14 @@ from publishers.stream import Sample
 
 log = logging.getLogger("publishers")
 
+_BOOT_EPOCH = time.time_ns()  # fixed at process start
+
+
+def boot_epoch() -> int:
+    """This process's publisher epoch (its boot id): the wall clock in ns when it started, so a
+    restarted publisher has a new and larger one (fusion.messages.Measurement.epoch)."""
+    return _BOOT_EPOCH
+
 
 def publish(session: Any, samples: Sequence[Sample], *, speed: float = 1.0, match_timeout_s: float = 10.0,
             stop: threading.Event | None = None, progress: Callable[[int], None] | None = None) -> Counter[str]:

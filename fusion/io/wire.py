@@ -50,7 +50,7 @@ def detection_of(msg: m.Measurement, arrival_ns: int | None = None) -> Detection
         z = np.array(vals, dtype=np.float64)
         if d.has_noise:
             R = np.diag(np.square(np.array(var, dtype=np.float64)))
-    return Detection(msg.sensor_id, msg.t_ns, msg.seq, z, R, arrival_ns)
+    return Detection(msg.sensor_id, msg.t_ns, msg.seq, z, R, arrival_ns, msg.epoch)
 
 
 class Codec:
