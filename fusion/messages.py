@@ -207,6 +207,17 @@ class Counts(Base, kw_only=True):
     truth: int
 
 
+class SeqGapStats(Base, kw_only=True):
+    """A sensor's seq gaps (fusion.io.gaps): missing now, filled later, publisher runs seen, and
+    samples zenoh's miss detection reported lost before recovery (zenoh_missed)."""
+
+    missing: int
+    filled: int
+    epochs: int
+    restarts: int
+    zenoh_missed: int = 0
+
+
 class ServiceStatus(Base, tag="status", kw_only=True):
     v: Version = msgspec.field(default_factory=_schema_version)
     uptime_s: float
@@ -216,6 +227,7 @@ class ServiceStatus(Base, tag="status", kw_only=True):
     recording: str | None
     recording_bytes: int
     queue_depth: int
+    gaps: dict[str, SeqGapStats] = {}  # by sensor
 
 
 class Snapshot(Base, tag="snapshot", kw_only=True):

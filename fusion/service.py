@@ -14,6 +14,7 @@ recording and the stream file, close the Zenoh session.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import threading
 import time
@@ -241,7 +242,12 @@ class Service:
             "recording": None if self.sink is None else str(self.sink.path),
             "recording_bytes": 0 if self.sink is None else self._recording_bytes(),
             "queue_depth": len(self._q),
+            "gaps": self._gaps(),
         }
+
+    def _gaps(self) -> dict[str, dict[str, int]]:
+        """Per sensor: seq values missing (and filled later), publisher runs (fusion.io.gaps)."""
+        return {s: dataclasses.asdict(g) for s, g in self.pipeline.gaps.report().items()}
 
     def _recording_bytes(self) -> int:
         if isinstance(self.sink, RotatingSink):

@@ -2,15 +2,22 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import msgspec
 import numpy as np
 import pytest
 
 from fusion import messages as m
 from fusion.config import TimeConfig
+from fusion.cli.report import format_status
 from fusion.io import wire
+from fusion.io.gaps import SensorGaps, SeqGaps
+from fusion.io.query import query_status
+from fusion.io.zenoh_bus import wait_for_match
 from fusion.tracking.detection import Detection, Reason
 from tests.tracking.test_refusals import CART, S
+from tests.service.harness import client, running_service, scenario_config
 from tests.tracking.helpers import make_tracker
 
 SEED = 1313
@@ -57,3 +64,56 @@ def test_a_restarted_publisher_is_told_apart_from_a_replay() -> None:
     replay = tr.process(first + restarted)
     assert [x.reason for x in replay.refused] == [Reason.DUPLICATE] * 12
     assert tr.counts.applied == 12
+
+
+# ---- 2. seq gaps ---------------------------------------------------------------------------------
+def test_gaps_count_missing_values_and_forget_filled_ones() -> None:
+    g = SeqGaps()
+    for s in (0, 1, 2, 5, 6, 9):
+        g.add("a", 1, s)
+    assert g.report()["a"] == SensorGaps(missing=4, filled=0, epochs=1, restarts=0)  # 3, 4, 7, 8
+    for s in (4, 7, 7, 6):  # late arrivals fill two holes; a repeat changes nothing
+        g.add("a", 1, s)
+    assert g.report()["a"] == SensorGaps(missing=2, filled=2, epochs=1, restarts=0)
+    g.add("a", 1, 12)  # a jump: 10, 11 missing
+    g.add("a", 2, 0)  # the publisher restarted: a new run, its seq from 0 again is no gap
+    g.add("a", 2, 2)
+    assert g.report()["a"] == SensorGaps(missing=5, filled=2, epochs=2, restarts=1)
+    g.add("b", 0, 10**12)  # a huge jump costs one interval, not 10**12 entries
+    g.add("b", 0, 0)
+    assert g.report()["b"].missing == 10**12 - 1
+
+
+def test_gap_memory_is_bounded() -> None:
+    rng = np.random.default_rng(SEED)
+    g = SeqGaps(max_intervals=8, max_epochs=2)
+    seqs = rng.permutation(1000)[:500]  # half of 0..999, in random order
+    for s in seqs.tolist():
+        g.add("a", 1, s)
+    exact = int(seqs.max() - seqs.min() + 1 - len(seqs))
+    assert g.report()["a"].missing >= exact  # given-up intervals stay counted, never lost
+    for e in (2, 3, 4):
+        g.add("a", e, 0)
+    r = g.report()["a"]
+    assert r.epochs == 4 and r.restarts == 3 and r.missing >= exact, f"seed {SEED}"
+
+
+def test_gaps_are_reported_in_status_through_real_zenoh(tmp_path: Path) -> None:
+    """A real zenoh client publishes cam1's seq 0..9 without 3, 4 and 7, then 7 late: status
+    (the queryable, and `fusion status`'s text) says 2 missing, 1 filled."""
+    _, cfg = scenario_config("mix")
+    with running_service(cfg, tmp_path) as (svc, endpoint):
+        session = client(endpoint)
+        try:
+            pub = session.declare_publisher(m.meas_key(cfg.namespace, "cam1"))
+            assert wait_for_match(pub, timeout_s=5.0)
+            for seq in (0, 1, 2, 5, 6, 8, 9, 7):
+                pub.put(m.encode(m.Measurement(sensor_id="cam1", t_ns=seq * S // 5, seq=seq, epoch=42,
+                                               data=m.Cartesian(pos_m=[100.0 + seq, 0.0]))))
+            assert svc.wait_idle(timeout_s=30.0)
+            st = query_status(session, cfg.namespace, timeout_s=5.0)
+        finally:
+            session.close()
+    assert st.counts.applied == 8
+    assert st.gaps["cam1"] == m.SeqGapStats(missing=2, filled=1, epochs=1, restarts=0)
+    assert "seq gaps   cam1: 2 missing, 1 filled late" in format_status(st, cfg.namespace)
