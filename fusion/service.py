@@ -27,6 +27,7 @@ from fusion.config import ServiceConfig
 from fusion.io import wire
 from fusion.io.recording import RotatingSink
 from fusion.io.rerun_sink import RerunSink
+from fusion.io.zenoh_advanced import RecoveringSubscription
 from fusion.io.zenoh_bus import zenoh_session_config
 from fusion.pipeline import Pipeline, Record
 from fusion.tracking.detection import Reason
@@ -131,8 +132,8 @@ class Service:
         self._refresh_status(force=True)
         s = self.session
         self._decls = [
-            s.declare_subscriber(wire.all_measurements_key(self.ns), self._on_sample),
-            s.declare_subscriber(wire.all_input_key(self.ns), self._on_sample),
+            RecoveringSubscription(s, wire.all_measurements_key(self.ns), self._on_sample),
+            RecoveringSubscription(s, wire.all_input_key(self.ns), self._on_sample),
             s.declare_subscriber(wire.all_truth_key(self.ns), self._on_sample),
             s.declare_queryable(wire.status_key(self.ns), self._on_status),
             s.declare_queryable(wire.snapshot_key(self.ns), self._on_snapshot),
@@ -246,8 +247,14 @@ class Service:
         }
 
     def _gaps(self) -> dict[str, dict[str, int]]:
-        """Per sensor: seq values missing (and filled later), publisher runs (fusion.io.gaps)."""
-        return {s: dataclasses.asdict(g) for s, g in self.pipeline.gaps.report().items()}
+        """Per sensor: seq values missing (and filled later), publisher runs (fusion.io.gaps),
+        and samples zenoh reported missed for good (fusion.io.zenoh_advanced)."""
+        out = {s: dataclasses.asdict(g) for s, g in self.pipeline.gaps.report().items()}
+        for d in self._decls[:2]:
+            for sensor, n in d.missed().items():
+                row = out.setdefault(sensor, {"missing": 0, "filled": 0, "epochs": 0, "restarts": 0})
+                row["zenoh_missed"] = row.get("zenoh_missed", 0) + n
+        return dict(sorted(out.items()))
 
     def _recording_bytes(self) -> int:
         if isinstance(self.sink, RotatingSink):
