@@ -218,6 +218,18 @@ class SeqGapStats(Base, kw_only=True):
     zenoh_missed: int = 0
 
 
+class ZenohLink(Base, kw_only=True):
+    """How the service is joined to zenoh: state "listening" (a peer), "connected" or
+    "disconnected" (a client); connect_attempts it took at start; reconnects since."""
+
+    mode: str
+    state: str
+    routers: int
+    peers: int
+    connect_attempts: int
+    reconnects: int
+
+
 class ServiceStatus(Base, tag="status", kw_only=True):
     v: Version = msgspec.field(default_factory=_schema_version)
     uptime_s: float
@@ -228,6 +240,7 @@ class ServiceStatus(Base, tag="status", kw_only=True):
     recording_bytes: int
     queue_depth: int
     gaps: dict[str, SeqGapStats] = {}  # by sensor
+    zenoh: ZenohLink | None = None
 
 
 class Snapshot(Base, tag="snapshot", kw_only=True):

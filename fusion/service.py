@@ -28,7 +28,7 @@ from fusion.io import wire
 from fusion.io.recording import RotatingSink
 from fusion.io.rerun_sink import RerunSink
 from fusion.io.zenoh_advanced import RecoveringSubscription
-from fusion.io.zenoh_bus import zenoh_session_config
+from fusion.io.zenoh_bus import connection_of, open_with_retry
 from fusion.pipeline import Pipeline, Record
 from fusion.tracking.detection import Reason
 from fusion.tracking.results import Estimate
@@ -74,6 +74,9 @@ class Service:
         self.session: Any = None
         self._decls: list[Any] = []
         self.on_publish: Callable[[Estimate], None] | None = None
+        self._connect_attempts = 0
+        self._linked = True  # a client: connected to its peer or router when last looked
+        self._reconnects = 0
 
     # ---- Zenoh side ----------------------------------------------------------------------------
     def _on_sample(self, sample: Any) -> None:
@@ -119,8 +122,9 @@ class Service:
         """Open the Zenoh session, then the output files, then declare the subscribers and
         queryables."""
         zc = self.config.zenoh
-        conf = zenoh_session_config(zc, namespace=self.ns)
-        self.session = self._zenoh.open(conf)
+        self.session, self._connect_attempts = open_with_retry(zc, namespace=self.ns, stop=self._stop)
+        if self.session is None:  # stopped while connecting: nothing was opened
+            return
         try:
             self._open_outputs()
         except BaseException:
@@ -171,6 +175,8 @@ class Service:
         """Process until stop() (or a signal handler calling it) or `duration_s`; then shut down."""
         if self.session is None:
             self.open()
+            if self.session is None:
+                return 0
         deadline = None if duration_s is None else time.monotonic() + duration_s
         batch_max = self.config.intake.batch_max
         try:
@@ -244,7 +250,27 @@ class Service:
             "recording_bytes": 0 if self.sink is None else self._recording_bytes(),
             "queue_depth": len(self._q),
             "gaps": self._gaps(),
+            "zenoh": self._link(),
         }
+
+    def _link(self) -> dict[str, Any]:
+        """How the session is joined: a peer is "listening"; a client "connected" or
+        "disconnected" (zenoh reconnects by itself; each return is counted)."""
+        routers, peers = connection_of(self.session) if self.session is not None else (0, 0)
+        mode = self.config.zenoh.mode
+        if mode == "client":
+            linked = routers + peers > 0
+            if linked and not self._linked:
+                self._reconnects += 1
+                log.warning("zenoh: connected again to %s", ", ".join(self.config.zenoh.connect))
+            elif self._linked and not linked and self.session is not None:
+                log.warning("zenoh: lost the connection to %s; reconnecting", ", ".join(self.config.zenoh.connect))
+            self._linked = linked
+            state = "connected" if linked else "disconnected"
+        else:
+            state = "listening"
+        return {"mode": mode, "state": state, "routers": routers, "peers": peers,
+                "connect_attempts": self._connect_attempts, "reconnects": self._reconnects}
 
     def _gaps(self) -> dict[str, dict[str, int]]:
         """Per sensor: seq values missing (and filled later), publisher runs (fusion.io.gaps),

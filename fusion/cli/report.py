@@ -64,6 +64,11 @@ def format_status(st: m.ServiceStatus, namespace: str) -> str:
         f"  queue      {st.queue_depth} waiting",
         "  recording  " + (f"{st.recording} ({size(st.recording_bytes)})" if st.recording else "off"),
     ]
+    if st.zenoh is not None:
+        z = st.zenoh
+        again = f", {z.reconnects} reconnects" if z.reconnects else ""
+        lines.append(f"  zenoh      {z.mode} {z.state} ({z.routers} routers, {z.peers} peers; "
+                     f"{z.connect_attempts} attempts to start{again})")
     for sensor, lat in sorted(st.latency.items()):
         lines.append(f"  latency    {sensor}: mean {lat.mean_ms:.1f} ms, p50 {lat.p50_ms:.1f}, p99 {lat.p99_ms:.1f}, "
                      f"max {lat.max_ms:.1f} ms over {lat.count} measurements")

@@ -114,6 +114,7 @@ def encode_status(status: dict[str, Any]) -> bytes:
         latency={k: m.LatencyStats(**asdict(v)) for k, v in status["latency"].items()},
         recording=status["recording"], recording_bytes=status["recording_bytes"], queue_depth=status["queue_depth"],
         gaps={k: m.SeqGapStats(**v) for k, v in status.get("gaps", {}).items()},
+        zenoh=m.ZenohLink(**status["zenoh"]) if status.get("zenoh") else None,
     )
     return m.encode(msg)
 

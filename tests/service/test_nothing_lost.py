@@ -15,6 +15,7 @@ import pytest
 from fusion import messages as m
 from fusion.config import TimeConfig
 from fusion.cli.report import format_status
+from fusion.cli.runner import Exit, explain_zenoh
 from fusion.io import wire
 from fusion.io.gaps import SensorGaps, SeqGaps
 from fusion.io.query import query_status
@@ -216,3 +217,93 @@ def test_a_sample_dropped_on_the_way_is_recovered_or_counted(tmp_path: Path, cac
         assert g["missing"] == 0 and g.get("zenoh_missed", 0) == 0, g
     else:
         assert g["missing"] == 2 and g["zenoh_missed"] == 2, g
+
+
+# ---- 4. a client service whose peer is not there yet, or goes away --------------------------------
+def _wait(cond: Any, timeout_s: float = 15.0) -> bool:
+    deadline = time.monotonic() + timeout_s
+    while not cond():
+        if time.monotonic() > deadline:
+            return False
+        time.sleep(0.02)
+    return True
+
+
+def _put_cam1(endpoint: str, ns: str, seqs: range) -> None:
+    session = client(endpoint)
+    try:
+        pub = declare_recoverable_publisher(session, m.meas_key(ns, "cam1"))
+        assert wait_for_recovering_subscriber(session, m.meas_key(ns, "cam1"), timeout_s=10.0)
+        for seq in seqs:
+            pub.put(_cam1(seq))
+        time.sleep(0.3)
+        pub.undeclare()
+    finally:
+        session.close()
+
+
+def test_a_client_service_waits_for_its_peer_and_reconnects(tmp_path: Path) -> None:
+    import zenoh
+
+    _, cfg = scenario_config("mix")
+    endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
+    zc = ZenohConfig(mode="client", listen=[], connect=[endpoint], connect_wait_s=20.0, retry_max_s=0.2)
+    svc = Service(msgspec.structs.replace(cfg, zenoh=zc), recording_path=tmp_path / "c.rrd",
+                  stream_path=tmp_path / "c.fstream")
+    t = threading.Thread(target=svc.run, name="client-service")  # run() opens: retrying until the peer is up
+    t.start()
+    hub = None
+    try:
+        time.sleep(0.8)
+        assert svc.session is None and t.is_alive(), "the service gave up or connected to nothing"
+        hub = zenoh.open(session_config(mode="peer", listen=[endpoint]))
+        assert _wait(lambda: svc.session is not None)
+        assert svc.status_dict()["zenoh"]["connect_attempts"] > 1
+        _put_cam1(endpoint, cfg.namespace, range(0, 3))
+        assert _wait(lambda: svc.status_dict()["counts"]["applied"] == 3)
+        assert svc.status_dict()["zenoh"]["state"] == "connected"
+        hub.close()  # the peer goes away ...
+        hub = None
+        assert _wait(lambda: svc.status_dict()["zenoh"]["state"] == "disconnected")
+        hub = zenoh.open(session_config(mode="peer", listen=[endpoint]))  # ... and comes back
+        assert _wait(lambda: svc.status_dict()["zenoh"]["state"] == "connected")
+        _put_cam1(endpoint, cfg.namespace, range(3, 6))
+        assert _wait(lambda: svc.status_dict()["counts"]["applied"] == 6)
+        link = svc.status_dict()["zenoh"]
+        assert link["reconnects"] == 1 and link["mode"] == "client", link
+        assert "zenoh      client connected" in format_status(m.decode_status(wire.encode_status(svc.status_dict())),
+                                                            cfg.namespace)
+    finally:
+        svc.stop()
+        t.join(timeout=60)
+        if hub is not None:
+            hub.close()
+    assert not t.is_alive()
+
+
+def test_a_client_service_with_no_peer_gives_up_after_connect_wait(tmp_path: Path) -> None:
+    _, cfg = scenario_config("mix")
+    zc = ZenohConfig(mode="client", listen=[], connect=[f"tcp/127.0.0.1:{free_tcp_port()}"], connect_wait_s=0.5,
+                     retry_max_s=0.1)
+    svc = Service(msgspec.structs.replace(cfg, zenoh=zc), recording_path=tmp_path / "n.rrd")
+    t0 = time.monotonic()
+    with pytest.raises(Exception, match="Unable to connect") as e:
+        svc.open()
+    assert 0.5 <= time.monotonic() - t0 < 5.0
+    assert not (tmp_path / "n.rrd").exists(), "a service that could not start left a recording"
+    err = explain_zenoh(e.value, where="fusion serve")
+    assert err.code == Exit.CONNECT and "start the peer or router" in str(err) and "fusion serve" not in str(err)
+
+
+def test_a_service_stopped_while_connecting_stops_at_once(tmp_path: Path) -> None:
+    _, cfg = scenario_config("mix")
+    zc = ZenohConfig(mode="client", listen=[], connect=[f"tcp/127.0.0.1:{free_tcp_port()}"], connect_wait_s=60.0)
+    svc = Service(msgspec.structs.replace(cfg, zenoh=zc), recording_path=tmp_path / "s.rrd")
+    t = threading.Thread(target=svc.run, name="stopped-while-connecting")
+    t.start()
+    time.sleep(0.5)
+    t0 = time.monotonic()
+    svc.stop()
+    t.join(timeout=10)
+    assert not t.is_alive() and time.monotonic() - t0 < 3.0
+    assert svc.session is None and not (tmp_path / "s.rrd").exists()
