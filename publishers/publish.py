@@ -4,8 +4,8 @@ Publishers are declared per key with blocking congestion control (the default, D
 messages in bursts). Measurements and inputs go through zenoh's advanced publisher
 (fusion.io.zenoh_advanced: a cache of the last `cache_samples`, heartbeats, publisher
 detection), so a service that joins late or drops a sample recovers it from the cache; the
-loop still waits (bounded) until the service's subscription is announced, so that a burst
-larger than the cache is not lost before it. speed 1 is real time, speed 10 ten
+loop still waits (bounded) until the service's subscriptions are announced (truth's too), so
+that a burst larger than the cache is not lost before them. speed 1 is real time, speed 10 ten
 times faster, speed 0 as fast as possible.
 """
 
@@ -19,6 +19,7 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 from fusion.io.zenoh_advanced import declare_recoverable_publisher, wait_for_recovering_subscriber
+from fusion.io.zenoh_bus import wait_for_match
 from publishers.stream import Sample
 
 log = logging.getLogger("publishers")
@@ -49,9 +50,12 @@ def publish(session: Any, samples: Sequence[Sample], *, speed: float = 1.0, matc
             pubs[s.key] = session.declare_publisher(s.key, congestion_control=zenoh.CongestionControl.BLOCK)
     counts: Counter[str] = Counter()
     try:
-        meas = [k for k in sorted(pubs) if _recoverable(k)]
-        for k in meas:
-            if not wait_for_recovering_subscriber(session, k, timeout_s=match_timeout_s):
+        # truth's too: a truth sample that reaches the service after the measurements of its
+        # time cannot score them
+        for k in sorted(pubs, key=lambda k: (not _recoverable(k), k)):
+            matched = (wait_for_recovering_subscriber(session, k, timeout_s=match_timeout_s) if _recoverable(k)
+                       else wait_for_match(pubs[k], timeout_s=match_timeout_s))
+            if not matched:
                 log.warning("no subscriber matched %s within %.1f s; publishing anyway", k, match_timeout_s)
                 break
         if not samples:

@@ -199,6 +199,7 @@ def test_a_sample_dropped_on_the_way_is_recovered_or_counted(tmp_path: Path, cac
             pub = declare_recoverable_publisher(session, m.meas_key(cfg.namespace, "cam1"), cache_samples=cache,
                                                 heartbeat_s=0.1)
             assert wait_for_recovering_subscriber(session, m.meas_key(cfg.namespace, "cam1"), timeout_s=5.0)
+            time.sleep(0.3)  # the publisher's cache queryable must reach the service before a loss
             for seq in range(10):
                 pub.put(_cam1(seq, pad=seq in (3, 4)))
             deadline = time.monotonic() + 10.0
