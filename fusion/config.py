@@ -289,7 +289,9 @@ class ZenohConfig(Section):
     only, with multicast and gossip scouting off: nothing else is needed on the machine.
     mode "client" connects to `connect` endpoints (a router or another peer). A listen endpoint
     off loopback is refused unless allow_remote is true. tls and access_control: see their
-    sections and SECURITY.md."""
+    sections and SECURITY.md. A client service whose peer is not there yet retries for
+    connect_wait_s (backoff from 0.1 s, doubling, at most retry_max_s between tries; 0: once),
+    and reconnects by itself (same backoff) when the peer goes away and comes back."""
 
     mode: Literal["peer", "client"] = "peer"
     listen: list[str] = msgspec.field(default_factory=lambda: ["tcp/127.0.0.1:7447"])
@@ -297,6 +299,8 @@ class ZenohConfig(Section):
     allow_remote: bool = False
     tls: TlsConfig | None = None
     access_control: AccessControlConfig | None = None
+    connect_wait_s: Annotated[float, msgspec.Meta(ge=0.0, le=86400.0)] = 30.0
+    retry_max_s: Annotated[float, msgspec.Meta(gt=0.0, le=60.0)] = 2.0
 
 
 class RecordingConfig(Section):

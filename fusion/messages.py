@@ -43,6 +43,7 @@ Elevation = Annotated[float, msgspec.Meta(ge=-math.pi / 2, le=math.pi / 2)]
 Prob = Annotated[float, msgspec.Meta(ge=0.0, le=1.0)]
 TimeNs = Annotated[int, msgspec.Meta(ge=-(2**62), le=2**62)]
 Seq = Annotated[int, msgspec.Meta(ge=0, le=2**62)]
+Epoch = Annotated[int, msgspec.Meta(ge=0, le=2**63 - 1)]
 Id = Annotated[str, msgspec.Meta(pattern=r"^[A-Za-z0-9_.\-]{1,64}$")]
 Version = Annotated[int, msgspec.Meta(ge=1, le=SCHEMA_VERSION)]
 
@@ -108,13 +109,18 @@ class Radar(Base, tag="radar", kw_only=True):
 
 
 class Measurement(Base, tag="measurement", kw_only=True):
-    """One measurement of one sensor at sensor time t_ns (integer nanoseconds)."""
+    """One measurement of one sensor at sensor time t_ns (integer nanoseconds).
+
+    epoch: the publisher's boot id, fixed from its process start (fusion-publish uses the wall
+    clock in ns at start); seq counts from 0 again in a new epoch. 0 (the default, left off the
+    wire) means the publisher gives none: messages of schema 1 without it still decode."""
 
     v: Version = msgspec.field(default_factory=_schema_version)
     sensor_id: Id
     t_ns: TimeNs
     seq: Seq
     data: Cartesian | Radar
+    epoch: Epoch = 0
 
 
 class Input(Base, tag="input", kw_only=True):
@@ -201,6 +207,29 @@ class Counts(Base, kw_only=True):
     truth: int
 
 
+class SeqGapStats(Base, kw_only=True):
+    """A sensor's seq gaps (fusion.io.gaps): missing now, filled later, publisher runs seen, and
+    samples zenoh's miss detection reported lost before recovery (zenoh_missed)."""
+
+    missing: int
+    filled: int
+    epochs: int
+    restarts: int
+    zenoh_missed: int = 0
+
+
+class ZenohLink(Base, kw_only=True):
+    """How the service is joined to zenoh: state "listening" (a peer), "connected" or
+    "disconnected" (a client); connect_attempts it took at start; reconnects since."""
+
+    mode: str
+    state: str
+    routers: int
+    peers: int
+    connect_attempts: int
+    reconnects: int
+
+
 class ServiceStatus(Base, tag="status", kw_only=True):
     v: Version = msgspec.field(default_factory=_schema_version)
     uptime_s: float
@@ -210,6 +239,8 @@ class ServiceStatus(Base, tag="status", kw_only=True):
     recording: str | None
     recording_bytes: int
     queue_depth: int
+    gaps: dict[str, SeqGapStats] = {}  # by sensor
+    zenoh: ZenohLink | None = None
 
 
 class Snapshot(Base, tag="snapshot", kw_only=True):

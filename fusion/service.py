@@ -19,6 +19,7 @@ recording and the stream file, close the Zenoh session.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import threading
 import time
@@ -33,7 +34,8 @@ from fusion.fixed_lag import FixedLagSmoother, smoothed_key
 from fusion.io import wire
 from fusion.io.recording import RotatingSink
 from fusion.io.rerun_sink import RerunSink
-from fusion.io.zenoh_bus import zenoh_session_config
+from fusion.io.zenoh_advanced import RecoveringSubscription
+from fusion.io.zenoh_bus import connection_of, open_with_retry
 from fusion.pipeline import Pipeline, Record
 from fusion.prediction import Cadence, encode_predicted, predicted_key, snapshot_time
 from fusion.tracking.detection import Reason
@@ -88,6 +90,9 @@ class Service:
         self.session: Any = None
         self._decls: list[Any] = []
         self.on_publish: Callable[[Estimate], None] | None = None
+        self._connect_attempts = 0
+        self._linked = True  # a client: connected to its peer or router when last looked
+        self._reconnects = 0
 
     # ---- Zenoh side ----------------------------------------------------------------------------
     def _on_sample(self, sample: Any) -> None:
@@ -151,8 +156,9 @@ class Service:
         """Open the Zenoh session, then the output files, then declare the subscribers and
         queryables."""
         zc = self.config.zenoh
-        conf = zenoh_session_config(zc, namespace=self.ns)
-        self.session = self._zenoh.open(conf)
+        self.session, self._connect_attempts = open_with_retry(zc, namespace=self.ns, stop=self._stop)
+        if self.session is None:  # stopped while connecting: nothing was opened
+            return
         try:
             self._open_outputs()
         except BaseException:
@@ -164,8 +170,8 @@ class Service:
         self._refresh_status(force=True)
         s = self.session
         self._decls = [
-            s.declare_subscriber(wire.all_measurements_key(self.ns), self._on_sample),
-            s.declare_subscriber(wire.all_input_key(self.ns), self._on_sample),
+            RecoveringSubscription(s, wire.all_measurements_key(self.ns), self._on_sample),
+            RecoveringSubscription(s, wire.all_input_key(self.ns), self._on_sample),
             s.declare_subscriber(wire.all_truth_key(self.ns), self._on_sample),
             s.declare_queryable(wire.status_key(self.ns), self._on_status),
             s.declare_queryable(wire.snapshot_key(self.ns), self._on_snapshot),
@@ -217,6 +223,8 @@ class Service:
         """Process until stop() (or a signal handler calling it) or `duration_s`; then shut down."""
         if self.session is None:
             self.open()
+            if self.session is None:
+                return 0
         deadline = None if duration_s is None else time.monotonic() + duration_s
         batch_max = self.config.intake.batch_max
         try:
@@ -291,7 +299,38 @@ class Service:
             "recording": None if self.sink is None else str(self.sink.path),
             "recording_bytes": 0 if self.sink is None else self._recording_bytes(),
             "queue_depth": len(self._q),
+            "gaps": self._gaps(),
+            "zenoh": self._link(),
         }
+
+    def _link(self) -> dict[str, Any]:
+        """How the session is joined: a peer is "listening"; a client "connected" or
+        "disconnected" (zenoh reconnects by itself; each return is counted)."""
+        routers, peers = connection_of(self.session) if self.session is not None else (0, 0)
+        mode = self.config.zenoh.mode
+        if mode == "client":
+            linked = routers + peers > 0
+            if linked and not self._linked:
+                self._reconnects += 1
+                log.warning("zenoh: connected again to %s", ", ".join(self.config.zenoh.connect))
+            elif self._linked and not linked and self.session is not None:
+                log.warning("zenoh: lost the connection to %s; reconnecting", ", ".join(self.config.zenoh.connect))
+            self._linked = linked
+            state = "connected" if linked else "disconnected"
+        else:
+            state = "listening"
+        return {"mode": mode, "state": state, "routers": routers, "peers": peers,
+                "connect_attempts": self._connect_attempts, "reconnects": self._reconnects}
+
+    def _gaps(self) -> dict[str, dict[str, int]]:
+        """Per sensor: seq values missing (and filled later), publisher runs (fusion.io.gaps),
+        and samples zenoh reported missed for good (fusion.io.zenoh_advanced)."""
+        out = {s: dataclasses.asdict(g) for s, g in self.pipeline.gaps.report().items()}
+        for d in self._decls[:2]:
+            for sensor, n in d.missed().items():
+                row = out.setdefault(sensor, {"missing": 0, "filled": 0, "epochs": 0, "restarts": 0})
+                row["zenoh_missed"] = row.get("zenoh_missed", 0) + n
+        return dict(sorted(out.items()))
 
     def _recording_bytes(self) -> int:
         if isinstance(self.sink, RotatingSink):

@@ -25,7 +25,7 @@ from fusion.errors import FusionError
 from fusion.io.inspect import Summary, summarise
 from fusion.io.zenoh_bus import free_tcp_port, session_config
 from fusion.service import Service
-from publishers.publish import publish
+from publishers.publish import boot_epoch, publish
 from publishers.spec import load_scenario_file, scenario_path
 from publishers.stream import build_stream
 
@@ -119,7 +119,7 @@ def run_demo(*, scenario: str = "mix", duration_s: float | None = None, out: str
         spec = msgspec.structs.replace(spec, duration_s=duration_s)
     out = Path(out) if out is not None else default_out(scenario)
     stream = out.with_suffix(".fstream")
-    samples, truths = build_stream(spec, namespace=sf.service.namespace)
+    samples, truths = build_stream(spec, namespace=sf.service.namespace, epoch=boot_epoch())
     if duration_s is None:
         duration_s = max(int(t.t_ns[-1]) for t in truths if t.t_ns.size) / 1e9
     planned = Counter(s.key.split("/")[2] for s in samples)

@@ -59,6 +59,16 @@ def positive_float(text: str) -> float:
     return x
 
 
+def non_negative_float(text: str) -> float:
+    try:
+        x = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not x >= 0 or x == float("inf"):
+        raise argparse.ArgumentTypeError(f"must be 0 or a positive number of seconds, got {text!r}")
+    return x
+
+
 def speed(text: str) -> float:
     """'max' (0.0: as fast as possible) or a positive factor of real time."""
     if text.strip().lower() == "max":

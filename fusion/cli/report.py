@@ -64,9 +64,18 @@ def format_status(st: m.ServiceStatus, namespace: str) -> str:
         f"  queue      {st.queue_depth} waiting",
         "  recording  " + (f"{st.recording} ({size(st.recording_bytes)})" if st.recording else "off"),
     ]
+    if st.zenoh is not None:
+        z = st.zenoh
+        again = f", {z.reconnects} reconnects" if z.reconnects else ""
+        lines.append(f"  zenoh      {z.mode} {z.state} ({z.routers} routers, {z.peers} peers; "
+                     f"{z.connect_attempts} attempts to start{again})")
     for sensor, lat in sorted(st.latency.items()):
         lines.append(f"  latency    {sensor}: mean {lat.mean_ms:.1f} ms, p50 {lat.p50_ms:.1f}, p99 {lat.p99_ms:.1f}, "
                      f"max {lat.max_ms:.1f} ms over {lat.count} measurements")
+    for sensor, g in sorted(st.gaps.items()):
+        runs = f", {g.restarts} publisher restarts" if g.restarts else ""
+        zen = f", {g.zenoh_missed} reported missed by zenoh" if g.zenoh_missed else ""
+        lines.append(f"  seq gaps   {sensor}: {g.missing} missing, {g.filled} filled late{runs}{zen}")
     return "\n".join(lines)
 
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import re
 import socket
+import time
 from pathlib import Path
 from typing import Any
 
@@ -140,6 +141,24 @@ def test_nothing_to_connect_to(tmp_path: Path) -> None:
         assert f"cannot connect to {ep}: nothing is listening there; start the service first (fusion serve" in line
         assert ".rs:" not in line, "no Rust source paths"
     assert not list(tmp_path.rglob("*.fstream")), "record wrote nothing"
+
+
+def test_serve_as_a_client_with_nothing_to_connect_to(tmp_path: Path) -> None:
+    """`fusion serve -m client` retries for --connect-wait (saying so in its log), then gives up
+    with a hint for serve itself (not "start the service first"), and writes nothing."""
+    ep = f"tcp/127.0.0.1:{free_tcp_port()}"
+    config = str(SERVICE_TOML)
+    t0 = time.monotonic()
+    r = run("fusion", "serve", "-c", config, "-m", "client", "-e", ep, "--connect-wait", "0.5", cwd=tmp_path)
+    assert r.returncode == Exit.CONNECT, r.stderr
+    assert time.monotonic() - t0 >= 0.5
+    assert re.search(r"connecting: nothing listens at .* \(attempt 2\); retrying", r.stderr), r.stderr
+    last = r.stderr.strip().splitlines()[-1]
+    assert f"fusion serve: error: cannot connect to {ep}: nothing is listening there" in last
+    assert "start the peer or router it joins first" in last and "start the service first" not in last
+    r = run("fusion", "serve", "-q", "-c", config, "-m", "client", "-e", ep, "--connect-wait", "0", cwd=tmp_path)
+    assert r.returncode == Exit.CONNECT and "start the peer or router" in one_error_line(r)
+    assert not list(tmp_path.rglob("*.rrd")) and not list(tmp_path.rglob("*.fstream")), "serve wrote files"
 
 
 def test_no_service_answers(zenoh_hub: tuple[Any, str], tmp_path: Path) -> None:
