@@ -43,7 +43,7 @@ Elevation = Annotated[float, msgspec.Meta(ge=-math.pi / 2, le=math.pi / 2)]
 Prob = Annotated[float, msgspec.Meta(ge=0.0, le=1.0)]
 TimeNs = Annotated[int, msgspec.Meta(ge=-(2**62), le=2**62)]
 Seq = Annotated[int, msgspec.Meta(ge=0, le=2**62)]
-Id = Annotated[str, msgspec.Meta(pattern=r"^[A-Za-z0-9_.\-]{1,64}$")]
+Id = Annotated[str, msgspec.Meta(pattern=r"^[A-Za-z0-9_.\-]{1,64}\Z")]  # \Z: "$" matches before a final newline
 Version = Annotated[int, msgspec.Meta(ge=1, le=SCHEMA_VERSION)]
 
 
@@ -293,12 +293,12 @@ def decode_json(line: bytes | str) -> Message:
 
 
 # ---- key expressions ---------------------------------------------------------------------------
-_ID = re.compile(r"^[A-Za-z0-9_.\-]{1,64}$")
+_ID = re.compile(r"[A-Za-z0-9_.\-]{1,64}")  # used with fullmatch: "$" would let "cam1\n" through
 
 
 def check_id(what: str, value: str) -> str:
     """An id safe inside a key expression (no '/', '*', '$', '#', '?', spaces)."""
-    if not _ID.match(value):
+    if not isinstance(value, str) or not _ID.fullmatch(value):
         raise InputError(f"{what} {value!r} must be 1-64 of letters, digits, '_', '-', '.'")
     return value
 
