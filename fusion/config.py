@@ -288,13 +288,30 @@ class RecordingConfig(Section):
 
 
 class IntakeConfig(Section):
-    """The bounded hand-over from Zenoh threads to the tracker thread. When `queue_max` samples
-    wait, new ones are refused with reason "overload" (counted), so memory stays bounded and
-    Zenoh is never blocked. `batch_max` samples are processed per tracker call."""
+    """The bounded hand-over from Zenoh threads to the tracker thread (fusion.io.intake_queue),
+    for every key the service subscribes to. A payload over `max_message_bytes` is refused
+    "too_large" before it is copied or decoded; a source (a configured sensor's or control
+    source's key; all truth keys together; everything else together) sending faster than
+    `source_rate_hz` (0: no limit; bursts of `source_burst`) is refused "rate_limited"; when
+    `queue_max` samples or `queue_max_bytes` bytes wait, the source holding the most samples
+    loses its oldest ones, or the new sample when it is that source's ("overload"). All counted,
+    so memory stays bounded, Zenoh is never blocked, and one source's flood costs only that
+    source. `batch_max` samples are processed per tracker call, taken round-robin across sources.
+    `drain_deadline_s`: at shutdown, the queue is drained for at most this long; what is left is
+    dropped and counted as "shutdown" (the recording is then closed complete)."""
 
     queue_max: Annotated[int, msgspec.Meta(ge=1)] = 200_000
+    queue_max_bytes: Annotated[int, msgspec.Meta(ge=1)] = 256_000_000
+    max_message_bytes: Annotated[int, msgspec.Meta(ge=1)] = 65_536
+    source_rate_hz: NonNegFloat = 0.0
+    source_burst: Annotated[int, msgspec.Meta(ge=1)] = 1000
     batch_max: Annotated[int, msgspec.Meta(ge=1)] = 5_000
+    drain_deadline_s: NonNegFloat = 10.0
     max_future_wall_s: PosFloat = 3600.0  # refuse sensor times this far ahead of the wall clock
+
+    def __post_init__(self) -> None:
+        if self.max_message_bytes >= self.queue_max_bytes:
+            raise ValueError("intake.max_message_bytes must be smaller than intake.queue_max_bytes")
 
 
 class ServiceConfig(Section):

@@ -1,14 +1,16 @@
 """The fusion service: Zenoh in, tracker, estimates out over Zenoh, every step to Rerun.
 
-Threads: Zenoh's callback threads only append (arrival_ns, key, payload) to a bounded deque and
-wake the loop; the thread that calls `run` owns the tracker and does everything else. When
-`intake.queue_max` samples wait, new measurement samples are refused with reason "overload"
-(counted), so memory stays bounded and a Zenoh channel is never left undrained.
+Threads: Zenoh's callback threads only offer (arrival_ns, key, payload) to the intake queue
+(fusion.io.intake_queue: a byte limit per message checked before the payload is copied, bounds
+in samples and bytes, per-source rate limits and fair queueing, every refusal counted by reason)
+and wake the loop; the thread that calls `run` owns the tracker and does everything else, so
+memory stays bounded and a Zenoh channel is never left undrained.
 
 Queryables (answers prepared by the loop, so callbacks never touch the tracker):
   fusion/<ns>/status     ServiceStatus (msgpack)
   fusion/<ns>/snapshot   the latest estimate of every confirmed track (msgpack list)
-Shutdown (SIGINT, SIGTERM or stop()): stop intake, drain the queue, flush and close the
+Shutdown (SIGINT, SIGTERM or stop()): stop intake, drain the queue for at most
+intake.drain_deadline_s (the rest dropped, counted as "shutdown"), flush and close the
 recording and the stream file, close the Zenoh session.
 """
 
@@ -17,13 +19,13 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from collections import deque
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 from fusion.config import ServiceConfig
 from fusion.io import wire
+from fusion.io.intake_queue import IntakeLimits, IntakeQueue
 from fusion.io.recording import RotatingSink
 from fusion.io.rerun_sink import RerunSink
 from fusion.io.zenoh_bus import zenoh_session_config
@@ -57,11 +59,15 @@ class Service:
             max_future_wall_ns=round(config.intake.max_future_wall_s * 1e9),
             publish_tentative=config.publish_tentative, warnings_per_minute=config.warnings_per_minute,
         )
-        self._q: deque[Record] = deque()
+        ic = config.intake
+        known = [s.id for s in config.tracker.sensors] + ([config.tracker.control.source_id]
+                                                         if config.tracker.control is not None else [])
+        self._q = IntakeQueue(IntakeLimits(queue_max=ic.queue_max, queue_max_bytes=ic.queue_max_bytes,
+                                           max_message_bytes=ic.max_message_bytes, rate_hz=ic.source_rate_hz,
+                                           burst=ic.source_burst), known=known)
+        self._shutdown_dropped = 0
         self._wake = threading.Event()
         self._stop = threading.Event()
-        self._arrived = 0  # samples seen by the callback, any key (written by Zenoh threads only)
-        self._overload = 0
         self._processed = 0
         self._settled = 0  # samples fully handled (published, status refreshed) when the queue last emptied
         self._started_ns = time.time_ns()
@@ -73,15 +79,16 @@ class Service:
         self._decls: list[Any] = []
         self.on_publish: Callable[[Estimate], None] | None = None
 
+    @property
+    def intake(self) -> IntakeQueue:
+        """The intake queue (read its counts and depth; fusion.io.intake_queue)."""
+        return self._q
+
     # ---- Zenoh side ----------------------------------------------------------------------------
     def _on_sample(self, sample: Any) -> None:
-        key = str(sample.key_expr)
-        self._arrived += 1
-        if wire.is_measurement_key(key) and len(self._q) >= self.config.intake.queue_max:
-            self._overload += 1
-            return
-        self._q.append((time.time_ns(), key, sample.payload.to_bytes()))
-        self._wake.set()
+        payload = sample.payload
+        if self._q.offer(time.time_ns(), str(sample.key_expr), len(payload), payload.to_bytes) is None:
+            self._wake.set()
 
     def _on_status(self, query: Any) -> None:
         query.reply(wire.status_key(self.ns), self._status_payload)
@@ -145,11 +152,7 @@ class Service:
         self._wake.set()
 
     def _drain(self, limit: int) -> list[Record]:
-        q = self._q
-        out = []
-        while q and len(out) < limit:
-            out.append(q.popleft())
-        return out
+        return self._q.drain(limit)
 
     def _step(self, batch: list[Record]) -> None:
         if self.stream is not None:
@@ -180,7 +183,7 @@ class Service:
                     self._step(batch)
                     if not self._q:  # caught up: make the status answer current at once
                         self._refresh_status(force=True)
-                        self._settled = self._processed + self._overload
+                        self._settled = self._processed + self._q.refused_total
                 else:
                     self._wake.wait(0.05)
                     self._wake.clear()
@@ -197,8 +200,14 @@ class Service:
             return
         for d in self._decls[:3]:  # subscribers: no more intake
             d.undeclare()
-        while self._q:
+        deadline = time.monotonic() + self.config.intake.drain_deadline_s
+        while self._q and time.monotonic() < deadline:
             self._step(self._drain(self.config.intake.batch_max))
+        left = self._drain(len(self._q)) if self._q else []
+        if left:
+            self._shutdown_dropped += len(left)
+            log.warning("shutdown: drain deadline of %.1f s reached, %d queued samples dropped (counted as "
+                        "'shutdown')", self.config.intake.drain_deadline_s, len(left))
         self._refresh_status(force=True)
         for d in self._decls[3:]:
             d.undeclare()
@@ -214,17 +223,27 @@ class Service:
     # ---- status --------------------------------------------------------------------------------
     def _counts_for_recording(self) -> dict[str, int]:
         c = self.pipeline.counts().flat()
-        c["refused/overload"] = self._overload
+        for reason, n in self._intake_refused().items():
+            c[f"refused/{reason}"] = n
         return c
+
+    def _intake_refused(self) -> dict[str, int]:
+        """Refusals before decoding, by reason: the intake queue's, and samples dropped at shutdown."""
+        out = dict(self._q.refused)
+        if self._shutdown_dropped:
+            out["shutdown"] = self._shutdown_dropped
+        return out
 
     def status_dict(self) -> dict[str, Any]:
         """Counts add up: received = applied + truth + duplicates + sum(refused) + queued."""
         c = self.pipeline.counts()
         refused = {r.value: n for r, n in c.refused.items() if r != Reason.DUPLICATE}
-        if self._overload:
-            refused["overload"] = self._overload
-        arrived = self._arrived
-        queued = arrived - self._overload - self._processed
+        intake = self._intake_refused()
+        for reason, n in intake.items():
+            refused[reason] = refused.get(reason, 0) + n
+        refused = dict(sorted(refused.items()))
+        arrived = self._q.offered
+        queued = arrived - sum(intake.values()) - self._processed
         by_status: dict[str, int] = {}
         for t in self.tracker.tracks:
             by_status[t.status.label] = by_status.get(t.status.label, 0) + 1
@@ -254,7 +273,7 @@ class Service:
         deadline = time.monotonic() + timeout_s
         last, since = -1, time.monotonic()
         while time.monotonic() < deadline:
-            n = self._arrived
+            n = self._q.offered
             if n != last or self._q:
                 last, since = n, time.monotonic()
             elif time.monotonic() - since >= quiet_s and self._settled >= n:
