@@ -314,6 +314,19 @@ class IntakeConfig(Section):
             raise ValueError("intake.max_message_bytes must be smaller than intake.queue_max_bytes")
 
 
+class CheckpointConfig(Section):
+    """[checkpoint]: the tracker's state written atomically every `interval_s` and at shutdown,
+    and resumed at start (same track ids; the status says how old the checkpoint was). path ""
+    is <recording.directory>/<recording.prefix>.checkpoint for a service with rotating
+    recordings, and no checkpoint for a one-file run (fusion demo) unless a path is given. A
+    checkpoint that cannot be used is moved aside and the service starts clean
+    (fusion.io.checkpointer)."""
+
+    enabled: bool = True
+    path: str = ""
+    interval_s: PosFloat = 10.0
+
+
 class ServiceConfig(Section):
     """`fusion serve --config FILE`: everything the service needs."""
 
@@ -322,6 +335,7 @@ class ServiceConfig(Section):
     zenoh: ZenohConfig = ZenohConfig()
     recording: RecordingConfig = RecordingConfig()
     intake: IntakeConfig = IntakeConfig()
+    checkpoint: CheckpointConfig = CheckpointConfig()
     publish_tentative: bool = False
     warnings_per_minute: Annotated[int, msgspec.Meta(ge=1)] = 60
 

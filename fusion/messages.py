@@ -201,6 +201,20 @@ class Counts(Base, kw_only=True):
     truth: int
 
 
+class CheckpointStatus(Base, kw_only=True):
+    """The service's checkpoint: how many tracks were resumed from one how old (seconds, None:
+    none resumed), why one found at start was refused, writes so far, the age of the last one,
+    and the last write error (None when the last write worked)."""
+
+    path: str
+    resumed_tracks: int
+    resumed_age_s: float | None = None
+    refused: str | None = None
+    written: int
+    last_written_age_s: float | None = None
+    error: str | None = None
+
+
 class ServiceStatus(Base, tag="status", kw_only=True):
     v: Version = msgspec.field(default_factory=_schema_version)
     uptime_s: float
@@ -210,6 +224,7 @@ class ServiceStatus(Base, tag="status", kw_only=True):
     recording: str | None
     recording_bytes: int
     queue_depth: int
+    checkpoint: CheckpointStatus | None = None
 
 
 class Snapshot(Base, tag="snapshot", kw_only=True):

@@ -25,13 +25,14 @@ from typing import Any
 
 from fusion.config import ServiceConfig
 from fusion.io import wire
+from fusion.io.checkpointer import Checkpointer, counts_since, service_checkpoint_path
 from fusion.io.intake_queue import IntakeLimits, IntakeQueue
 from fusion.io.recording import RotatingSink
 from fusion.io.rerun_sink import RerunSink
 from fusion.io.zenoh_bus import zenoh_session_config
 from fusion.pipeline import Pipeline, Record
 from fusion.tracking.detection import Reason
-from fusion.tracking.results import Estimate
+from fusion.tracking.results import Counts, Estimate
 from fusion.tracking.tracker import Tracker
 
 log = logging.getLogger("fusion.service")
@@ -50,7 +51,10 @@ class Service:
         self._zenoh = zenoh
         self.config = config
         self.ns = config.namespace
-        self.tracker = Tracker(config.tracker)
+        cp = service_checkpoint_path(config.checkpoint, config.recording, recording_dir=recording_dir,
+                                     one_file=recording_path is not None)
+        self.checkpoints = None if cp is None else Checkpointer(cp, interval_s=config.checkpoint.interval_s)
+        self.tracker = Tracker(config.tracker)  # replaced by the checkpoint's, if any, in open()
         self.sink: RotatingSink | RerunSink | None = None
         self.stream: Any = None
         self._outputs = (recording_dir, recording_path, stream_path)  # files are created by open()
@@ -62,6 +66,7 @@ class Service:
         ic = config.intake
         known = [s.id for s in config.tracker.sensors] + ([config.tracker.control.source_id]
                                                          if config.tracker.control is not None else [])
+        self._base_counts = self.pipeline.counts()  # what a resumed tracker carried in: not this run's
         self._q = IntakeQueue(IntakeLimits(queue_max=ic.queue_max, queue_max_bytes=ic.queue_max_bytes,
                                            max_message_bytes=ic.max_message_bytes, rate_hz=ic.source_rate_hz,
                                            burst=ic.source_burst), known=known)
@@ -120,6 +125,13 @@ class Service:
             self.stream = StreamWriter(sp, namespace=self.ns)
         self.pipeline.sink = self.sink
 
+    def _resume(self) -> None:
+        """Take the checkpoint's tracker, if there is a usable one (fusion.io.checkpointer)."""
+        resumed = None if self.checkpoints is None else self.checkpoints.resume(self.config.tracker)
+        if resumed is not None:
+            self.tracker = self.pipeline.tracker = resumed
+            self._base_counts = self.pipeline.counts()
+
     def open(self) -> None:
         """Open the Zenoh session, then the output files, then declare the subscribers and
         queryables."""
@@ -127,6 +139,7 @@ class Service:
         conf = zenoh_session_config(zc, namespace=self.ns)
         self.session = self._zenoh.open(conf)
         try:
+            self._resume()
             self._open_outputs()
         except BaseException:
             if self.sink is not None:
@@ -189,6 +202,8 @@ class Service:
                     self._wake.clear()
                 if self.sink is not None:
                     self.sink.maybe_flush()
+                if self.checkpoints is not None:
+                    self.checkpoints.maybe_write(self.tracker)
                 self._refresh_status()
         finally:
             self.shutdown()
@@ -208,6 +223,8 @@ class Service:
             self._shutdown_dropped += len(left)
             log.warning("shutdown: drain deadline of %.1f s reached, %d queued samples dropped (counted as "
                         "'shutdown')", self.config.intake.drain_deadline_s, len(left))
+        if self.checkpoints is not None:
+            self.checkpoints.write(self.tracker)
         self._refresh_status(force=True)
         for d in self._decls[3:]:
             d.undeclare()
@@ -222,10 +239,14 @@ class Service:
 
     # ---- status --------------------------------------------------------------------------------
     def _counts_for_recording(self) -> dict[str, int]:
-        c = self.pipeline.counts().flat()
+        c = self._run_counts().flat()
         for reason, n in self._intake_refused().items():
             c[f"refused/{reason}"] = n
         return c
+
+    def _run_counts(self) -> Counts:
+        """This run's counts (a resumed tracker's carried-in counts taken off)."""
+        return counts_since(self.pipeline.counts(), self._base_counts)
 
     def _intake_refused(self) -> dict[str, int]:
         """Refusals before decoding, by reason: the intake queue's, and samples dropped at shutdown."""
@@ -236,7 +257,7 @@ class Service:
 
     def status_dict(self) -> dict[str, Any]:
         """Counts add up: received = applied + truth + duplicates + sum(refused) + queued."""
-        c = self.pipeline.counts()
+        c = self._run_counts()
         refused = {r.value: n for r, n in c.refused.items() if r != Reason.DUPLICATE}
         intake = self._intake_refused()
         for reason, n in intake.items():
@@ -260,6 +281,7 @@ class Service:
             "recording": None if self.sink is None else str(self.sink.path),
             "recording_bytes": 0 if self.sink is None else self._recording_bytes(),
             "queue_depth": len(self._q),
+            "checkpoint": None if self.checkpoints is None else self.checkpoints.status(),
         }
 
     def _recording_bytes(self) -> int:

@@ -113,6 +113,7 @@ def encode_status(status: dict[str, Any]) -> bytes:
         uptime_s=status["uptime_s"], counts=m.Counts(**c), tracks=status["tracks"],
         latency={k: m.LatencyStats(**asdict(v)) for k, v in status["latency"].items()},
         recording=status["recording"], recording_bytes=status["recording_bytes"], queue_depth=status["queue_depth"],
+        checkpoint=m.CheckpointStatus(**status["checkpoint"]) if status.get("checkpoint") else None,
     )
     return m.encode(msg)
 
