@@ -276,7 +276,12 @@ class ZenohConfig(Section):
 
 class RecordingConfig(Section):
     """Rerun recordings of every step, rotated by size or duration; names sort by time.
-    `stream` also keeps the raw input (every sample with its arrival time) for `fusion replay`."""
+    `stream` also keeps the raw input (every sample with its arrival time) for `fusion replay`,
+    in a `.fstream` beside each `.rrd` that rotates with it (and on its own past rotate_mb).
+    Retention: the oldest files are deleted while more than `keep_files` recordings are kept or
+    all of them take more than `keep_mb` (0: no limit). A recording or stream that fails while
+    the service runs (disk full, folder gone) stops; tracking and publishing go on, and the
+    status says why (fusion.io.recording_guard, fusion.io.stream_rotation)."""
 
     enabled: bool = True
     directory: str = "recordings"
@@ -285,6 +290,8 @@ class RecordingConfig(Section):
     rotate_s: Annotated[float, msgspec.Meta(gt=0.0)] = 3600.0
     flush_interval_s: Annotated[float, msgspec.Meta(gt=0.0, le=60.0)] = 0.5
     stream: bool = True
+    keep_files: Annotated[int, msgspec.Meta(ge=0)] = 0
+    keep_mb: NonNegFloat = 10_000.0
 
 
 class IntakeConfig(Section):

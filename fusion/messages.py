@@ -225,6 +225,7 @@ class ServiceStatus(Base, tag="status", kw_only=True):
     recording_bytes: int
     queue_depth: int
     checkpoint: CheckpointStatus | None = None
+    recording_error: str | None = None  # why the recording or the stream file stopped, if it did
 
 
 class Snapshot(Base, tag="snapshot", kw_only=True):

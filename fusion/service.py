@@ -28,7 +28,9 @@ from fusion.io import wire
 from fusion.io.checkpointer import Checkpointer, counts_since, service_checkpoint_path
 from fusion.io.intake_queue import IntakeLimits, IntakeQueue
 from fusion.io.recording import RotatingSink
+from fusion.io.recording_guard import GuardedSink
 from fusion.io.rerun_sink import RerunSink
+from fusion.io.stream_rotation import Retention, RotatingStream
 from fusion.io.zenoh_bus import zenoh_session_config
 from fusion.pipeline import Pipeline, Record
 from fusion.tracking.detection import Reason
@@ -56,7 +58,9 @@ class Service:
         self.checkpoints = None if cp is None else Checkpointer(cp, interval_s=config.checkpoint.interval_s)
         self.tracker = Tracker(config.tracker)  # replaced by the checkpoint's, if any, in open()
         self.sink: RotatingSink | RerunSink | None = None
-        self.stream: Any = None
+        self.stream: RotatingStream | None = None
+        self._guard: GuardedSink | None = None
+        self._retention: Retention | None = None
         self._outputs = (recording_dir, recording_path, stream_path)  # files are created by open()
         self.pipeline = Pipeline(
             self.tracker, wire.Codec(self.ns), sink=None,
@@ -118,12 +122,16 @@ class Service:
         elif rc.enabled:
             self.sink = RotatingSink(rdir, prefix=rc.prefix, rotate_bytes=int(rc.rotate_mb * 1e6),
                                      rotate_s=rc.rotate_s, **common)
+        rotating = self.sink if isinstance(self.sink, RotatingSink) else None
         if stream_path is not None or (self.sink is not None and rc.stream):
-            from fusion.io.streamfile import StreamWriter
-
             sp = Path(stream_path) if stream_path is not None else self.sink.path.with_suffix(wire.STREAM_SUFFIX)  # type: ignore[union-attr]
-            self.stream = StreamWriter(sp, namespace=self.ns)
-        self.pipeline.sink = self.sink
+            follow = None if rotating is None or stream_path is not None else (lambda: rotating.path)
+            self.stream = RotatingStream(sp, namespace=self.ns, rotate_bytes=int(rc.rotate_mb * 1e6), follow=follow)
+        if rotating is not None:
+            self._retention = Retention(rdir, prefix=rc.prefix, keep_files=rc.keep_files,
+                                        keep_bytes=int(rc.keep_mb * 1e6))
+        self._guard = None if self.sink is None else GuardedSink(self.sink)
+        self.pipeline.sink = self._guard
 
     def _resume(self) -> None:
         """Take the checkpoint's tracker, if there is a usable one (fusion.io.checkpointer)."""
@@ -200,8 +208,10 @@ class Service:
                 else:
                     self._wake.wait(0.05)
                     self._wake.clear()
-                if self.sink is not None:
-                    self.sink.maybe_flush()
+                if self._guard is not None:
+                    self._guard.maybe_flush()
+                if self._retention is not None:
+                    self._retention.maybe_sweep(self._open_files())
                 if self.checkpoints is not None:
                     self.checkpoints.maybe_write(self.tracker)
                 self._refresh_status()
@@ -229,10 +239,12 @@ class Service:
         for d in self._decls[3:]:
             d.undeclare()
         self._decls = []
-        if self.sink is not None:
-            self.sink.close()
+        if self._guard is not None:
+            self._guard.close()
         if self.stream is not None:
             self.stream.close()
+        if self._retention is not None:
+            self._retention.sweep(self._open_files())
         self.session.close()
         self.session = None
         log.info("fusion service stopped: %s", self.status_dict()["counts"])
@@ -281,8 +293,16 @@ class Service:
             "recording": None if self.sink is None else str(self.sink.path),
             "recording_bytes": 0 if self.sink is None else self._recording_bytes(),
             "queue_depth": len(self._q),
+            "recording_error": self._recording_error(),
             "checkpoint": None if self.checkpoints is None else self.checkpoints.status(),
         }
+
+    def _open_files(self) -> tuple[Path, ...]:
+        return tuple(p.path for p in (self.sink, self.stream) if p is not None)
+
+    def _recording_error(self) -> str | None:
+        errors = [g.error for g in (self._guard, self.stream) if g is not None and g.error]
+        return "; ".join(errors) or None
 
     def _recording_bytes(self) -> int:
         if isinstance(self.sink, RotatingSink):

@@ -114,6 +114,7 @@ def encode_status(status: dict[str, Any]) -> bytes:
         latency={k: m.LatencyStats(**asdict(v)) for k, v in status["latency"].items()},
         recording=status["recording"], recording_bytes=status["recording_bytes"], queue_depth=status["queue_depth"],
         checkpoint=m.CheckpointStatus(**status["checkpoint"]) if status.get("checkpoint") else None,
+        recording_error=status.get("recording_error"),
     )
     return m.encode(msg)
 
