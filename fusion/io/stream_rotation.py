@@ -17,6 +17,7 @@ limit); files still open are never deleted. The service sweeps whenever a file i
 
 from __future__ import annotations
 
+import contextlib
 import logging
 from collections.abc import Callable
 from pathlib import Path
@@ -67,10 +68,8 @@ class RotatingStream:
             log.error("%s; tracking and publishing go on, the input is not recorded", msg)
         self.error = msg
         if self._w is not None:
-            try:
+            with contextlib.suppress(OSError):  # the file is lost already, its error is the one reported
                 self._w.close()
-            except OSError:
-                pass  # the file is lost already, its error is the one reported
             self._w = None
 
     def _rotate(self) -> None:

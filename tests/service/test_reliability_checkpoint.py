@@ -65,7 +65,8 @@ def test_a_restarted_service_resumes_its_tracks_with_the_same_ids(tmp_path: Path
         finally:
             s.close()
     assert len(first) == 1
-    assert read_checkpoint(rec / f"{cfg.recording.prefix}.checkpoint", cfg.tracker) is not None, "no checkpoint at shutdown"
+    cp = rec / f"{cfg.recording.prefix}.checkpoint"
+    assert read_checkpoint(cp, cfg.tracker) is not None, "no checkpoint at shutdown"
     with service_in(cfg, rec) as (svc, endpoint):
         st = _status(endpoint, cfg.namespace)
         assert st.checkpoint is not None and st.checkpoint.resumed_tracks == 1

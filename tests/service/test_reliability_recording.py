@@ -9,6 +9,7 @@ import time
 from pathlib import Path
 
 import msgspec
+
 from fusion import messages as m
 from fusion.config import RecordingConfig, ZenohConfig
 from fusion.io.stream_rotation import Retention, RotatingStream
