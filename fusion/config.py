@@ -264,7 +264,8 @@ class ZenohConfig(Section):
     only, with multicast and gossip scouting off: nothing else is needed on the machine.
     mode "client" connects to `connect` endpoints (a router or another peer). A listen endpoint
     off loopback is refused unless allow_remote is true. tls and access_control: see their
-    sections and SECURITY.md."""
+    sections and SECURITY.md. connect_retry_s: a client whose router or peer is not up at start
+    retries with backoff for this long (fusion.io.link_monitor)."""
 
     mode: Literal["peer", "client"] = "peer"
     listen: list[str] = msgspec.field(default_factory=lambda: ["tcp/127.0.0.1:7447"])
@@ -272,6 +273,7 @@ class ZenohConfig(Section):
     allow_remote: bool = False
     tls: TlsConfig | None = None
     access_control: AccessControlConfig | None = None
+    connect_retry_s: NonNegFloat = 30.0  # client mode: retry with backoff this long when nothing answers at start
 
 
 class RecordingConfig(Section):

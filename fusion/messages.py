@@ -221,6 +221,17 @@ class CheckpointStatus(Base, kw_only=True):
     error: str | None = None
 
 
+class LinkStatus(Base, kw_only=True):
+    """The service's Zenoh links now: connected (any router or peer), how many, how many times
+    all were lost and came back, and the attempts it took to connect at start."""
+
+    connected: bool
+    links: int
+    disconnects: int
+    reconnects: int
+    connect_attempts: int
+
+
 class ServiceStatus(Base, tag="status", kw_only=True):
     v: Version = msgspec.field(default_factory=_schema_version)
     uptime_s: float
@@ -232,6 +243,7 @@ class ServiceStatus(Base, tag="status", kw_only=True):
     queue_depth: int
     checkpoint: CheckpointStatus | None = None
     recording_error: str | None = None  # why the recording or the stream file stopped, if it did
+    link: LinkStatus | None = None
 
 
 class Snapshot(Base, tag="snapshot", kw_only=True):

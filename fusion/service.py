@@ -27,6 +27,7 @@ from fusion.config import ServiceConfig
 from fusion.io import wire
 from fusion.io.checkpointer import Checkpointer, counts_since, service_checkpoint_path
 from fusion.io.intake_queue import IntakeLimits, IntakeQueue
+from fusion.io.link_monitor import LinkMonitor, open_with_retry
 from fusion.io.recording import RotatingSink
 from fusion.io.recording_guard import GuardedSink
 from fusion.io.rerun_sink import RerunSink
@@ -85,6 +86,7 @@ class Service:
         self._status_at = 0.0
         self.published = 0
         self.session: Any = None
+        self.link: LinkMonitor | None = None
         self._decls: list[Any] = []
         self.on_publish: Callable[[Estimate], None] | None = None
 
@@ -145,7 +147,11 @@ class Service:
         queryables."""
         zc = self.config.zenoh
         conf = zenoh_session_config(zc, namespace=self.ns)
-        self.session = self._zenoh.open(conf)
+        if zc.mode == "client":
+            self.session, attempts = open_with_retry(self._zenoh, conf, retry_s=zc.connect_retry_s, stop=self._stop)
+            self.link = LinkMonitor(self.session, attempts=attempts)
+        else:
+            self.session = self._zenoh.open(conf)
         try:
             self._resume()
             self._open_outputs()
@@ -214,6 +220,8 @@ class Service:
                     self._retention.maybe_sweep(self._open_files())
                 if self.checkpoints is not None:
                     self.checkpoints.maybe_write(self.tracker)
+                if self.link is not None:
+                    self.link.poll()
                 self._refresh_status()
         finally:
             self.shutdown()
@@ -294,6 +302,7 @@ class Service:
             "recording_bytes": 0 if self.sink is None else self._recording_bytes(),
             "queue_depth": len(self._q),
             "recording_error": self._recording_error(),
+            "link": None if self.link is None else self.link.status(),
             "checkpoint": None if self.checkpoints is None else self.checkpoints.status(),
         }
 

@@ -115,6 +115,7 @@ def encode_status(status: dict[str, Any]) -> bytes:
         recording=status["recording"], recording_bytes=status["recording_bytes"], queue_depth=status["queue_depth"],
         checkpoint=m.CheckpointStatus(**status["checkpoint"]) if status.get("checkpoint") else None,
         recording_error=status.get("recording_error"),
+        link=m.LinkStatus(**status["link"]) if status.get("link") else None,
     )
     return m.encode(msg)
 
