@@ -232,6 +232,16 @@ class LinkStatus(Base, kw_only=True):
     connect_attempts: int
 
 
+class SeqGapStatus(Base, kw_only=True):
+    """A sensor's sequence numbers as they arrived: missing now (skipped, not yet come late),
+    filled (came late), restarts (the numbering started again) and the highest seen."""
+
+    missing: int
+    filled: int
+    restarts: int
+    highest_seq: int
+
+
 class ServiceStatus(Base, tag="status", kw_only=True):
     v: Version = msgspec.field(default_factory=_schema_version)
     uptime_s: float
@@ -244,6 +254,7 @@ class ServiceStatus(Base, tag="status", kw_only=True):
     checkpoint: CheckpointStatus | None = None
     recording_error: str | None = None  # why the recording or the stream file stopped, if it did
     link: LinkStatus | None = None
+    seq_gaps: dict[str, SeqGapStatus] = {}  # by sensor
 
 
 class Snapshot(Base, tag="snapshot", kw_only=True):

@@ -31,8 +31,10 @@ from fusion.io.link_monitor import LinkMonitor, open_with_retry
 from fusion.io.recording import RotatingSink
 from fusion.io.recording_guard import GuardedSink
 from fusion.io.rerun_sink import RerunSink
+from fusion.io.seq_gaps import SeqGaps, peek
 from fusion.io.stream_rotation import Retention, RotatingStream
 from fusion.io.zenoh_bus import zenoh_session_config
+from fusion.messages import meas_key
 from fusion.pipeline import Pipeline, Record
 from fusion.tracking.detection import Reason
 from fusion.tracking.results import Counts, Estimate
@@ -76,6 +78,8 @@ class Service:
                                            max_message_bytes=ic.max_message_bytes, rate_hz=ic.source_rate_hz,
                                            burst=ic.source_burst), known=known)
         self._shutdown_dropped = 0
+        self.seq_gaps = SeqGaps()
+        self._meas_keys = {meas_key(self.ns, s.id): s.id for s in config.tracker.sensors}
         self._wake = threading.Event()
         self._stop = threading.Event()
         self._processed = 0
@@ -179,7 +183,12 @@ class Service:
         self._wake.set()
 
     def _drain(self, limit: int) -> list[Record]:
-        return self._q.drain(limit)
+        batch = self._q.drain(limit)
+        keys = self._meas_keys
+        for _, key, payload in batch:
+            if key in keys and (p := peek(payload)) is not None and p[0] == keys[key]:
+                self.seq_gaps.see(*p)
+        return batch
 
     def _step(self, batch: list[Record]) -> None:
         if self.stream is not None:
@@ -303,6 +312,7 @@ class Service:
             "queue_depth": len(self._q),
             "recording_error": self._recording_error(),
             "link": None if self.link is None else self.link.status(),
+            "seq_gaps": self.seq_gaps.status(),
             "checkpoint": None if self.checkpoints is None else self.checkpoints.status(),
         }
 

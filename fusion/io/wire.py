@@ -116,6 +116,7 @@ def encode_status(status: dict[str, Any]) -> bytes:
         checkpoint=m.CheckpointStatus(**status["checkpoint"]) if status.get("checkpoint") else None,
         recording_error=status.get("recording_error"),
         link=m.LinkStatus(**status["link"]) if status.get("link") else None,
+        seq_gaps={k: m.SeqGapStatus(**v) for k, v in status.get("seq_gaps", {}).items()},
     )
     return m.encode(msg)
 

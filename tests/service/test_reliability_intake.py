@@ -211,3 +211,28 @@ def test_a_live_flood_is_rate_limited_and_the_others_stay_fresh(tmp_path: Path) 
     cam_seqs = {e.seq for e in got if e.sensor_id == "cam1"}
     assert max(cam_seqs) == 39, "cam1's last measurement produced no estimate"
     assert len(cam_seqs) >= 35
+
+
+def test_seq_gaps_per_sensor_are_counted_in_status(tmp_path: Path) -> None:
+    """cam1 skips 3 numbers (one comes late), radar1 restarts its numbering: status says so."""
+    cfg = mix_config()
+    ns = cfg.namespace
+    t0 = time.time_ns()
+    with paused_service(cfg, tmp_path) as (svc, endpoint, start):
+        start()
+        s = client(endpoint)
+        try:
+            cp, rp = publisher(s, m.meas_key(ns, "cam1")), publisher(s, m.meas_key(ns, "radar1"))
+            for i, q in enumerate([0, 1, 2, 4, 5, 8, 3]):
+                cp.put(cam(q, t0 + i * 100_000_000))
+            for i, q in enumerate([5000, 5001, 0, 1]):
+                rp.put(radar(q, t0 + i * 100_000_000))
+            wait_offered(svc, 11)
+            assert svc.wait_idle(timeout_s=30.0)
+            time.sleep(0.15)
+            status = m.decode_status(query(s, m.status_key(ns)))
+        finally:
+            s.close()
+    g = status.seq_gaps
+    assert g["cam1"] == m.SeqGapStatus(missing=2, filled=1, restarts=0, highest_seq=8)  # 6, 7 missing; 3 late
+    assert g["radar1"] == m.SeqGapStatus(missing=0, filled=0, restarts=1, highest_seq=1)
