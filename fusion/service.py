@@ -250,6 +250,9 @@ class Service:
             self._shutdown_dropped += len(left)
             log.warning("shutdown: drain deadline of %.1f s reached, %d queued samples dropped (counted as "
                         "'shutdown')", self.config.intake.drain_deadline_s, len(left))
+            if self._guard is not None:  # a row to flush, so that the final counts reach the recording
+                self._guard.log_text(0, f"shutdown: drain deadline reached, {len(left)} queued samples dropped",
+                                     "WARN")
         if self.checkpoints is not None:
             self.checkpoints.write(self.tracker)
         self._refresh_status(force=True)

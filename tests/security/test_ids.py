@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import time
 from pathlib import Path
 
 import msgspec
@@ -10,7 +9,8 @@ import pytest
 
 from fusion import messages as m
 from fusion.errors import InputError
-from tests.service.harness import client, query, running_service, scenario_config
+from tests.service.harness import client, running_service, scenario_config
+from tests.service.reliability_helpers import publisher, settled_status
 
 ODD = ["cam1\n", "cam1\r", "cam1\n\n", "\ncam1", "cam 1", "cam1/x", "cam*", "", "a" * 65, "câm1", "cam1\x00"]
 
@@ -57,18 +57,12 @@ def test_the_service_refuses_a_trailing_newline_id_on_the_sensors_key(tmp_path: 
     with running_service(cfg, tmp_path) as (svc, endpoint):
         s = client(endpoint)
         try:
-            pub = s.declare_publisher(m.meas_key(ns, "cam1"))
-            tpub = s.declare_publisher(m.truth_key(ns, "x"))
-            deadline = time.monotonic() + 5
-            while not (pub.matching_status.matching and tpub.matching_status.matching) and time.monotonic() < deadline:
-                time.sleep(0.001)
+            pub, tpub = publisher(s, m.meas_key(ns, "cam1")), publisher(s, m.truth_key(ns, "x"))
             pub.put(_meas("cam1\n"))
             tpub.put(m.encode(m.Truth(target_id="x\n", t_ns=1, state=[0.0, 0.0, 0.0, 0.0],
                                       layout=["x", "vx", "y", "vy"])))
             pub.put(_meas("cam1"))
-            assert svc.wait_idle(timeout_s=30.0)
-            time.sleep(0.15)
-            status = m.decode_status(query(s, m.status_key(ns)))
+            status = settled_status(svc, s, ns)
         finally:
             s.close()
     c = status.counts

@@ -5,7 +5,6 @@ message and the service starts clean."""
 from __future__ import annotations
 
 import logging
-import threading
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -15,30 +14,21 @@ import msgspec
 import pytest
 
 from fusion import messages as m
-from fusion.config import CheckpointConfig, ServiceConfig, ZenohConfig
+from fusion.config import CheckpointConfig, ServiceConfig
 from fusion.io.checkpoint import read_checkpoint
-from fusion.io.zenoh_bus import free_tcp_port
 from fusion.service import Service
 from publishers.publish import publish
 from publishers.stream import build_stream
 from tests.service.harness import EstimateCollector, client, query, scenario_config
+from tests.service.reliability_helpers import service_thread
 
 
 @contextmanager
 def service_in(cfg: ServiceConfig, rec: Path) -> Iterator[tuple[Service, str]]:
     """The service as `fusion serve --recordings rec` runs it (rotating files, the default
-    checkpoint rec/<prefix>.checkpoint), on a free loopback port."""
-    endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
-    svc = Service(msgspec.structs.replace(cfg, zenoh=ZenohConfig(mode="peer", listen=[endpoint])), recording_dir=rec)
-    svc.open()
-    t = threading.Thread(target=svc.run)
-    t.start()
-    try:
+    checkpoint rec/<prefix>.checkpoint)."""
+    with service_thread(cfg, recording_dir=rec) as (svc, endpoint, _):
         yield svc, endpoint
-    finally:
-        svc.stop()
-        t.join(timeout=60)
-        assert not t.is_alive()
 
 
 def _status(endpoint: str, ns: str) -> m.ServiceStatus:

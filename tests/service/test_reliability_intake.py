@@ -7,18 +7,15 @@ from __future__ import annotations
 
 import threading
 import time
-from collections.abc import Iterator
-from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
 import msgspec
 
 from fusion import messages as m
-from fusion.config import IntakeConfig, ServiceConfig, ZenohConfig
-from fusion.io.zenoh_bus import free_tcp_port
-from fusion.service import Service
-from tests.service.harness import EstimateCollector, client, query, scenario_config
+from fusion.config import IntakeConfig, ServiceConfig
+from tests.service.harness import EstimateCollector, client, scenario_config
+from tests.service.reliability_helpers import publisher, service_thread, settled_status, wait_offered
 
 
 def mix_config(**intake: Any) -> ServiceConfig:
@@ -26,41 +23,9 @@ def mix_config(**intake: Any) -> ServiceConfig:
     return msgspec.structs.replace(cfg, intake=IntakeConfig(**intake))
 
 
-@contextmanager
-def paused_service(cfg: ServiceConfig, tmp: Path) -> Iterator[tuple[Service, str, Any]]:
-    """An opened service whose loop starts only when the third value is called: samples that
-    arrive before that wait in the intake queue, as behind a slow tracker."""
-    endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
-    cfg = msgspec.structs.replace(cfg, zenoh=ZenohConfig(mode="peer", listen=[endpoint]))
-    svc = Service(cfg, recording_path=tmp / "live.rrd", stream_path=tmp / "live.fstream")
-    svc.open()
-    t = threading.Thread(target=svc.run, name="service-under-test")
-    try:
-        yield svc, endpoint, t.start
-    finally:
-        svc.stop()
-        if t.is_alive():
-            t.join(timeout=60)
-        else:
-            svc.shutdown()
-        assert not t.is_alive(), "the service did not stop"
-
-
-def publisher(s: Any, key: str) -> Any:
-    import zenoh
-
-    p = s.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK)
-    deadline = time.monotonic() + 5
-    while not p.matching_status.matching and time.monotonic() < deadline:
-        time.sleep(0.001)
-    return p
-
-
-def wait_offered(svc: Service, n: int, timeout_s: float = 30.0) -> None:
-    deadline = time.monotonic() + timeout_s
-    while svc.intake.offered < n and time.monotonic() < deadline:
-        time.sleep(0.005)
-    assert svc.intake.offered == n, f"{svc.intake.offered} of {n} samples arrived"
+def stalled(cfg: ServiceConfig, tmp: Path) -> Any:
+    """The service with its loop not started until start() (see service_thread)."""
+    return service_thread(cfg, started=False, recording_path=tmp / "live.rrd", stream_path=tmp / "live.fstream")
 
 
 def cam(seq: int, t_ns: int, x: float = 100.0) -> bytes:
@@ -84,7 +49,7 @@ def test_byte_limit_and_bounds_cover_every_key(tmp_path: Path) -> None:
     cfg = mix_config(queue_max=50, max_message_bytes=4096)
     ns = cfg.namespace
     truth = m.encode(m.Truth(target_id="x", t_ns=1, state=[0.0, 0.0, 0.0, 0.0], layout=["x", "vx", "y", "vy"]))
-    with paused_service(cfg, tmp_path) as (svc, endpoint, start):
+    with stalled(cfg, tmp_path) as (svc, endpoint, start):
         s = client(endpoint)
         try:
             big = publisher(s, m.meas_key(ns, "cam1"))
@@ -100,9 +65,7 @@ def test_byte_limit_and_bounds_cover_every_key(tmp_path: Path) -> None:
             assert svc.intake.max_depth == 50
             assert svc.intake.max_bytes < 50 * 1000
             start()
-            assert svc.wait_idle(timeout_s=30.0)
-            time.sleep(0.15)
-            status = m.decode_status(query(s, m.status_key(ns)))
+            status = settled_status(svc, s, ns)
         finally:
             s.close()
     c = status.counts
@@ -116,7 +79,7 @@ def test_byte_limit_and_bounds_cover_every_key(tmp_path: Path) -> None:
 def test_a_queue_bounded_in_bytes(tmp_path: Path) -> None:
     cfg = mix_config(queue_max=10_000, queue_max_bytes=200_000, max_message_bytes=60_000)
     ns = cfg.namespace
-    with paused_service(cfg, tmp_path) as (svc, endpoint, start):
+    with stalled(cfg, tmp_path) as (svc, endpoint, start):
         s = client(endpoint)
         try:
             p = publisher(s, m.meas_key(ns, "radar1"))
@@ -125,9 +88,7 @@ def test_a_queue_bounded_in_bytes(tmp_path: Path) -> None:
             wait_offered(svc, 100)
             assert len(svc.intake) == 3 and svc.intake.max_bytes <= 200_000
             start()
-            assert svc.wait_idle(timeout_s=30.0)
-            time.sleep(0.15)
-            status = m.decode_status(query(s, m.status_key(ns)))
+            status = settled_status(svc, s, ns)
         finally:
             s.close()
     c = status.counts
@@ -140,7 +101,7 @@ def test_a_flood_from_one_sensor_costs_only_that_sensor(tmp_path: Path) -> None:
     cfg = mix_config(queue_max=100)
     ns = cfg.namespace
     t0 = time.time_ns()
-    with paused_service(cfg, tmp_path) as (svc, endpoint, start):
+    with stalled(cfg, tmp_path) as (svc, endpoint, start):
         s = client(endpoint)
         try:
             rp = publisher(s, m.meas_key(ns, "radar1"))
@@ -152,9 +113,7 @@ def test_a_flood_from_one_sensor_costs_only_that_sensor(tmp_path: Path) -> None:
             wait_offered(svc, 5020)
             assert svc.intake.depth_by_source() == {"meas/cam1": 20, "meas/radar1": 80}
             start()
-            assert svc.wait_idle(timeout_s=30.0)
-            time.sleep(0.15)
-            status = m.decode_status(query(s, m.status_key(ns)))
+            status = settled_status(svc, s, ns)
         finally:
             s.close()
     c = status.counts
@@ -170,7 +129,7 @@ def test_a_live_flood_is_rate_limited_and_the_others_stay_fresh(tmp_path: Path) 
     ns = cfg.namespace
     stop = threading.Event()
     flooded = [0]
-    with paused_service(cfg, tmp_path) as (svc, endpoint, start):
+    with stalled(cfg, tmp_path) as (svc, endpoint, start):
         start()
         s, sub = client(endpoint), client(endpoint)
         try:
@@ -197,9 +156,7 @@ def test_a_live_flood_is_rate_limited_and_the_others_stay_fresh(tmp_path: Path) 
             finally:
                 stop.set()
                 ft.join()
-            assert svc.wait_idle(timeout_s=30.0)
-            time.sleep(0.15)
-            status = m.decode_status(query(s, m.status_key(ns)))
+            status = settled_status(svc, s, ns)
             got = col.snapshot()
         finally:
             sub.close()
@@ -218,7 +175,7 @@ def test_seq_gaps_per_sensor_are_counted_in_status(tmp_path: Path) -> None:
     cfg = mix_config()
     ns = cfg.namespace
     t0 = time.time_ns()
-    with paused_service(cfg, tmp_path) as (svc, endpoint, start):
+    with stalled(cfg, tmp_path) as (svc, endpoint, start):
         start()
         s = client(endpoint)
         try:
@@ -228,9 +185,7 @@ def test_seq_gaps_per_sensor_are_counted_in_status(tmp_path: Path) -> None:
             for i, q in enumerate([5000, 5001, 0, 1]):
                 rp.put(radar(q, t0 + i * 100_000_000))
             wait_offered(svc, 11)
-            assert svc.wait_idle(timeout_s=30.0)
-            time.sleep(0.15)
-            status = m.decode_status(query(s, m.status_key(ns)))
+            status = settled_status(svc, s, ns)
         finally:
             s.close()
     g = status.seq_gaps

@@ -4,21 +4,17 @@ the folder bounded, and a recording that fails (disk full, folder gone) stops tr
 from __future__ import annotations
 
 import shutil
-import threading
-import time
 from pathlib import Path
 
 import msgspec
 
-from fusion import messages as m
-from fusion.config import RecordingConfig, ZenohConfig
+from fusion.config import RecordingConfig
 from fusion.io.stream_rotation import Retention, RotatingStream
 from fusion.io.streamfile import StreamReader
-from fusion.io.zenoh_bus import free_tcp_port
-from fusion.service import Service
 from publishers.publish import publish
 from publishers.stream import build_stream
-from tests.service.harness import EstimateCollector, client, query, scenario_config
+from tests.service.harness import EstimateCollector, client, scenario_config
+from tests.service.reliability_helpers import service_thread, settled_status
 
 
 def rec(i: int) -> tuple[int, str, bytes]:
@@ -86,13 +82,7 @@ def test_a_recordings_folder_gone_stops_the_recording_not_the_tracking(tmp_path:
     samples, _ = build_stream(spec, namespace=cfg.namespace)
     d = tmp_path / "rec"
     rc = RecordingConfig(prefix="r", rotate_s=0.3)
-    endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
-    svc = Service(msgspec.structs.replace(cfg, recording=rc, zenoh=ZenohConfig(mode="peer", listen=[endpoint])),
-                  recording_dir=d)
-    svc.open()
-    t = threading.Thread(target=svc.run)
-    t.start()
-    try:
+    with service_thread(msgspec.structs.replace(cfg, recording=rc), recording_dir=d) as (svc, endpoint, _):
         s = client(endpoint)
         try:
             col = EstimateCollector(s, cfg.namespace)
@@ -101,16 +91,10 @@ def test_a_recordings_folder_gone_stops_the_recording_not_the_tracking(tmp_path:
             shutil.rmtree(d)
             d.write_text("not a folder any more")
             publish(s, samples[10:], speed=1.0, match_timeout_s=5.0)
-            assert svc.wait_idle(timeout_s=30.0)
-            time.sleep(0.2)
-            st = m.decode_status(query(s, m.status_key(cfg.namespace)))
+            st = settled_status(svc, s, cfg.namespace)
             got = col.snapshot()
         finally:
             s.close()
-    finally:
-        svc.stop()
-        t.join(timeout=60)
-    assert not t.is_alive()
     n_meas = sum(1 for x in samples if "/meas/" in x.key)
     assert st.counts.applied == n_meas and st.tracks == {"confirmed": 1}
     assert len(got) == st.counts.published > n_meas // 2
@@ -125,22 +109,13 @@ def test_the_service_rotates_both_files_and_keeps_the_newest(tmp_path: Path) -> 
     spec = msgspec.structs.replace(spec, duration_s=4.0)
     samples, _ = build_stream(spec, namespace=cfg.namespace)
     rc = RecordingConfig(prefix="r", rotate_s=0.5, keep_files=2, keep_mb=0.0)
-    endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
-    svc = Service(msgspec.structs.replace(cfg, recording=rc, zenoh=ZenohConfig(mode="peer", listen=[endpoint])),
-                  recording_dir=tmp_path)
-    svc.open()
-    t = threading.Thread(target=svc.run)
-    t.start()
-    try:
+    with service_thread(msgspec.structs.replace(cfg, recording=rc), recording_dir=tmp_path) as (svc, endpoint, _):
         s = client(endpoint)
         try:
             publish(s, samples, speed=1.0, match_timeout_s=5.0)
             assert svc.wait_idle(timeout_s=30.0)
         finally:
             s.close()
-    finally:
-        svc.stop()
-        t.join(timeout=60)
     rrds = sorted(tmp_path.glob("r-*.rrd"))
     streams = sorted(tmp_path.glob("r-*.fstream"))
     assert svc.stream is not None and len(svc.stream.files) >= 4, "the stream did not rotate with the recording"

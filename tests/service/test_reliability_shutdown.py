@@ -18,7 +18,7 @@ from fusion.io.streamfile import StreamReader
 from fusion.io.zenoh_bus import free_tcp_port
 from publishers.spec import scenario_path
 from tests.service.harness import client, query
-from tests.service.test_reliability_intake import publisher
+from tests.service.reliability_helpers import publisher
 
 ROOT = Path(__file__).resolve().parents[2]
 RERUN = Path(__import__("rerun_cli").__file__).parent / "rerun"
