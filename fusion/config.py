@@ -60,7 +60,18 @@ class RadarSensorConfig(_SensorBase, tag="radar"):
     range_rate_std_mps: PosFloat | None = None
 
 
-SensorConfig = CartesianSensorConfig | RadarSensorConfig
+class CustomSensorConfig(_SensorBase, tag="custom", kw_only=True):
+    """A user's measurement model by import path, "package.module:Name" built as Name(**params)
+    and checked at load (shapes, a finite-difference Jacobian check; fusion.models.loader). Its
+    h is in the world frame, so the pose goes into its params (position_m, heading_rad, pitch_rad
+    and roll_rad are refused); its R is the noise used when a message carries none. Its z comes
+    as a `cartesian` message's pos_m (1-3 components, noise std_m or cov_m2 in z's units)."""
+
+    model: str
+    params: dict[str, float | int | list[float]] = {}
+
+
+SensorConfig = CartesianSensorConfig | RadarSensorConfig | CustomSensorConfig
 
 
 class ModeConfig(Section):
@@ -197,6 +208,9 @@ class TrackerConfig(Section):
         if self.control is not None and self.control.source_id in ids:
             raise ValueError(f"control.source_id {self.control.source_id!r} is also a sensor id")
         for s in self.sensors:
+            if isinstance(s, CustomSensorConfig) and (s.position_m or s.heading_rad or s.pitch_rad or s.roll_rad):
+                raise ValueError(f"sensor {s.id}: a custom sensor's pose cannot be applied to its model: give it in "
+                                 "params (its h is in the world frame)")
             if isinstance(s, RadarSensorConfig) and d == 1:
                 raise ValueError(f"sensor {s.id}: a radar needs a 2-D or 3-D state (motion.ndim)")
             if s.position_m and len(s.position_m) != d:
@@ -336,6 +350,16 @@ class CheckpointConfig(Section):
     interval_s: PosFloat = 10.0
 
 
+class PublicationConfig(Section):
+    """[publication]: period_s > 0 also publishes, every period_s of stream (sensor) time, every
+    confirmed track predicted to that tick on fusion/<ns>/predicted (fusion.prediction); 0: off.
+    smooth_lag = L > 0 also publishes each confirmed estimate smoothed over the L estimates of
+    its track after it, x_k|k+L, on fusion/<ns>/smoothed/<track_id> (fusion.fixed_lag); 0: off."""
+
+    period_s: NonNegFloat = 0.0
+    smooth_lag: Annotated[int, msgspec.Meta(ge=0, le=1000)] = 0
+
+
 class ServiceConfig(Section):
     """`fusion serve --config FILE`: everything the service needs."""
 
@@ -345,6 +369,7 @@ class ServiceConfig(Section):
     recording: RecordingConfig = RecordingConfig()
     intake: IntakeConfig = IntakeConfig()
     checkpoint: CheckpointConfig = CheckpointConfig()
+    publication: PublicationConfig = PublicationConfig()
     publish_tentative: bool = False
     warnings_per_minute: Annotated[int, msgspec.Meta(ge=1)] = 60
 

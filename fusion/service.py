@@ -8,7 +8,12 @@ memory stays bounded and a Zenoh channel is never left undrained.
 
 Queryables (answers prepared by the loop, so callbacks never touch the tracker):
   fusion/<ns>/status     ServiceStatus (msgpack)
-  fusion/<ns>/snapshot   the latest estimate of every confirmed track (msgpack list)
+  fusion/<ns>/snapshot   the latest estimate of every confirmed track (msgpack list);
+                         with ?t_ns=T every confirmed track predicted to T (answered by the loop)
+Publications: fusion/<ns>/tracks/<id> (estimates), fusion/<ns>/events/<id> (confirmed,
+coasting, deleted with the reason, withdrawals; fusion.publication) and, with [publication]
+period_s, fusion/<ns>/predicted (fusion.prediction); with smooth_lag, fusion/<ns>/smoothed/<id>
+(fusion.fixed_lag).
 Shutdown (SIGINT, SIGTERM or stop()): stop intake, drain the queue for at most
 intake.drain_deadline_s (the rest dropped, counted as "shutdown"), flush and close the
 recording and the stream file, close the Zenoh session.
@@ -19,11 +24,14 @@ from __future__ import annotations
 import logging
 import threading
 import time
+from collections import deque
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from fusion import messages as m
 from fusion.config import ServiceConfig
+from fusion.fixed_lag import FixedLagSmoother, smoothed_key
 from fusion.io import wire
 from fusion.io.checkpointer import Checkpointer, counts_since, service_checkpoint_path
 from fusion.io.intake_queue import IntakeLimits, IntakeQueue
@@ -36,6 +44,7 @@ from fusion.io.stream_rotation import Retention, RotatingStream
 from fusion.io.zenoh_bus import zenoh_session_config
 from fusion.messages import meas_key
 from fusion.pipeline import Pipeline, Record
+from fusion.prediction import Cadence, encode_predicted, predicted_key, snapshot_time
 from fusion.tracking.detection import Reason
 from fusion.tracking.results import Counts, Estimate
 from fusion.tracking.tracker import Tracker
@@ -59,7 +68,7 @@ class Service:
         cp = service_checkpoint_path(config.checkpoint, config.recording, recording_dir=recording_dir,
                                      one_file=recording_path is not None)
         self.checkpoints = None if cp is None else Checkpointer(cp, interval_s=config.checkpoint.interval_s)
-        self.tracker = Tracker(config.tracker)  # replaced by the checkpoint's, if any, in open()
+        self.tracker = Tracker(config.tracker)  # the checkpoint's state, if any, is restored into it by open()
         self.sink: RotatingSink | RerunSink | None = None
         self.stream: RotatingStream | None = None
         self._guard: GuardedSink | None = None
@@ -89,6 +98,14 @@ class Service:
         self._snapshot_payload = b""
         self._status_at = 0.0
         self.published = 0
+        self.events_published = 0
+        self.predicted_published = 0  # periodic predicted snapshots
+        period_ns = round(config.publication.period_s * 1e9)
+        self.cadence = Cadence(period_ns) if period_ns > 0 else None
+        self._queries: deque[tuple[Any, int]] = deque()  # snapshot?t_ns queries for the loop
+        lag = config.publication.smooth_lag
+        self.lag_smoother = FixedLagSmoother(self.tracker, lag) if lag > 0 else None
+        self.smoothed_published = 0
         self.session: Any = None
         self.link: LinkMonitor | None = None
         self._decls: list[Any] = []
@@ -109,7 +126,25 @@ class Service:
         query.reply(wire.status_key(self.ns), self._status_payload)
 
     def _on_snapshot(self, query: Any) -> None:
-        query.reply(wire.snapshot_key(self.ns), self._snapshot_payload)
+        try:
+            t_ns = snapshot_time(query.parameters)
+        except ValueError as e:
+            query.reply_err(str(e))
+            return
+        if t_ns is None:
+            query.reply(wire.snapshot_key(self.ns), self._snapshot_payload)
+            return
+        self._queries.append((query, t_ns))  # the loop owns the tracker: it answers
+        self._wake.set()
+
+    def _answer_queries(self) -> None:
+        """Answer the snapshot?t_ns queries waiting (tracker thread)."""
+        while self._queries:
+            query, t_ns = self._queries.popleft()
+            try:
+                query.reply(wire.snapshot_key(self.ns), encode_predicted(self.tracker, t_ns))
+            finally:
+                query.drop()
 
     def _open_outputs(self) -> None:
         """Create the recording and the stream file (only once the session is open, so that a
@@ -140,10 +175,8 @@ class Service:
         self.pipeline.sink = self._guard
 
     def _resume(self) -> None:
-        """Take the checkpoint's tracker, if there is a usable one (fusion.io.checkpointer)."""
-        resumed = None if self.checkpoints is None else self.checkpoints.resume(self.config.tracker)
-        if resumed is not None:
-            self.tracker = self.pipeline.tracker = resumed
+        """Restore a usable checkpoint into the tracker, in place (fusion.io.checkpointer)."""
+        if self.checkpoints is not None and self.checkpoints.resume(self.tracker):
             self._base_counts = self.pipeline.counts()
 
     def open(self) -> None:
@@ -203,6 +236,20 @@ class Service:
             self.published += 1
             if self.on_publish is not None:
                 self.on_publish(e)
+        for ev in out.events_to_publish:
+            self.session.put(m.event_key(self.ns, ev.track_id), m.encode(wire.event_message(ev)),
+                             congestion_control=BLOCK)
+            self.events_published += 1
+        if self.lag_smoother is not None:
+            for e in self.lag_smoother.update(out.result.estimates):
+                self.session.put(smoothed_key(self.ns, e.track_id), enc(e), congestion_control=BLOCK)
+                self.smoothed_published += 1
+        if self.cadence is not None:
+            first = min((p.t_ns for p in out.result.measurements), default=None)
+            for t_ns in self.cadence.due(self.tracker.now_ns, first):
+                self.session.put(predicted_key(self.ns), encode_predicted(self.tracker, t_ns),
+                                 congestion_control=BLOCK)
+                self.predicted_published += 1
 
     def run(self, *, duration_s: float | None = None) -> int:
         """Process until stop() (or a signal handler calling it) or `duration_s`; then shut down."""
@@ -223,6 +270,7 @@ class Service:
                 else:
                     self._wake.wait(0.05)
                     self._wake.clear()
+                self._answer_queries()
                 if self._guard is not None:
                     self._guard.maybe_flush()
                 if self._retention is not None:
@@ -256,6 +304,7 @@ class Service:
         if self.checkpoints is not None:
             self.checkpoints.write(self.tracker)
         self._refresh_status(force=True)
+        self._answer_queries()
         for d in self._decls[3:]:
             d.undeclare()
         self._decls = []

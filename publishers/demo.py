@@ -69,7 +69,9 @@ def _open_service(cfg: Any, out: Path, stream: Path) -> tuple[Service, str]:
 
 
 class _Monitor:
-    """Asks the service for its status (its queryable) a few times a second and reports progress."""
+    """Asks the service for its status (its queryable) a few times a second and reports progress:
+    samples handled (measurements, inputs and truth: the service's `received` less its queue)
+    of all the samples the demo publishes."""
 
     def __init__(self, session: Any, namespace: str, total: int, progress: Progress) -> None:
         from fusion.io.query import query_status
@@ -139,7 +141,7 @@ def run_demo(*, scenario: str = "mix", duration_s: float | None = None, out: str
     counts: Counter[str] = Counter()
     try:
         with zenoh.open(session_config(mode="client", connect=[endpoint])) as session:
-            monitor = _Monitor(session, svc.ns, planned["meas"], progress) if progress is not None else None
+            monitor = _Monitor(session, svc.ns, sum(planned.values()), progress) if progress is not None else None
             try:
                 counts = publish(session, samples, speed=speed, match_timeout_s=10.0, stop=stop)
                 _wait_idle(svc, runner, stop, timeout_s=600.0)

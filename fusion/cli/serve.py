@@ -105,7 +105,8 @@ def _written(svc: Any) -> list[Path]:
 
 def record(args: argparse.Namespace) -> int:
     zc = a.client_zenoh(args)
-    out = args.out or Path("recordings") / f"{args.namespace}-{time.strftime('%Y%m%dT%H%M%S', time.gmtime())}.fstream"
+    stamp = time.strftime("%Y%m%dT%H%M%S", time.gmtime())
+    out = a.output_file(args.out or Path("recordings") / f"{args.namespace}-{stamp}.fstream", "stream file")
     import zenoh
 
     from fusion.io.recorder import Recorder

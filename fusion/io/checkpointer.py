@@ -22,7 +22,7 @@ from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
-from fusion.config import CheckpointConfig, RecordingConfig, TrackerConfig
+from fusion.config import CheckpointConfig, RecordingConfig
 from fusion.io.checkpoint import CheckpointError, read_checkpoint, write_checkpoint
 from fusion.tracking.results import Counts
 from fusion.tracking.tracker import Tracker
@@ -45,10 +45,11 @@ class Checkpointer:
         self.resumed_age_s: float | None = None
         self.refused: str | None = None  # why the checkpoint found at start was not used
 
-    def resume(self, config: TrackerConfig) -> Tracker | None:
-        """The checkpointed tracker, or None (no checkpoint, or a bad one moved aside)."""
+    def resume(self, tracker: Tracker) -> bool:
+        """Restore the checkpoint into `tracker` (freshly built, in place); False when there is
+        none or a bad one was moved aside (`tracker` then untouched)."""
         try:
-            r = read_checkpoint(self.path, config)
+            r = read_checkpoint(self.path, tracker.config, into=tracker)
         except CheckpointError as e:
             aside = self.path.with_name(f"{self.path.name}.bad-{time.time_ns()}")
             try:
@@ -58,14 +59,14 @@ class Checkpointer:
                 where = f"and it could not be moved aside ({oe.strerror or oe}); it will be overwritten"
             self.refused = str(e)
             log.warning("checkpoint refused: %s; %s; starting with no tracks", e, where)
-            return None
+            return False
         self._last = self._clock()
         if r is None:
             log.info("no checkpoint at %s: starting with no tracks", self.path)
-            return None
+            return False
         self.resumed_tracks, self.resumed_age_s = r.tracks, r.age_s
         log.info("resumed %d tracks from %s, written %.1f s ago", r.tracks, self.path, r.age_s)
-        return r.tracker
+        return True
 
     def maybe_write(self, tracker: Tracker) -> None:
         now = self._clock()

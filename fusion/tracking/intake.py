@@ -138,7 +138,7 @@ class Intake:
                           f"z has shape {z.shape}; sensor {d.sensor_id} takes lengths {sorted(sm.by_dim)}")
         if not np.isfinite(z).all():
             return d, _no(d, Reason.INVALID, "z holds NaN or inf")
-        if not sm.is_cartesian and not z[0] > 0:
+        if sm.is_radar and not z[0] > 0:
             return d, _no(d, Reason.INVALID, f"range must be > 0, got {z[0]}")
         m = z.shape[0]
         if d.R is None:
