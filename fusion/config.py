@@ -305,7 +305,12 @@ class ZenohConfig(Section):
 
 class RecordingConfig(Section):
     """Rerun recordings of every step, rotated by size or duration; names sort by time.
-    `stream` also keeps the raw input (every sample with its arrival time) for `fusion replay`."""
+    `stream` also keeps the raw input (every sample with its arrival time) for `fusion replay`,
+    in a `.fstream` beside each `.rrd` that rotates with it (and on its own past rotate_mb).
+    Retention: the oldest files are deleted while more than `keep_files` recordings are kept or
+    all of them take more than `keep_mb` (0: no limit). A recording or stream that fails while
+    the service runs (disk full, folder gone) stops; tracking and publishing go on, and the
+    status says why (fusion.io.recording_guard, fusion.io.stream_rotation)."""
 
     enabled: bool = True
     directory: str = "recordings"
@@ -314,16 +319,48 @@ class RecordingConfig(Section):
     rotate_s: Annotated[float, msgspec.Meta(gt=0.0)] = 3600.0
     flush_interval_s: Annotated[float, msgspec.Meta(gt=0.0, le=60.0)] = 0.5
     stream: bool = True
+    keep_files: Annotated[int, msgspec.Meta(ge=0)] = 0
+    keep_mb: NonNegFloat = 10_000.0
 
 
 class IntakeConfig(Section):
-    """The bounded hand-over from Zenoh threads to the tracker thread. When `queue_max` samples
-    wait, new ones are refused with reason "overload" (counted), so memory stays bounded and
-    Zenoh is never blocked. `batch_max` samples are processed per tracker call."""
+    """The bounded hand-over from Zenoh threads to the tracker thread (fusion.io.intake_queue),
+    for every key the service subscribes to. A payload over `max_message_bytes` is refused
+    "too_large" before it is copied or decoded; a source (a configured sensor's or control
+    source's key; all truth keys together; everything else together) sending faster than
+    `source_rate_hz` (0: no limit; bursts of `source_burst`) is refused "rate_limited"; when
+    `queue_max` samples or `queue_max_bytes` bytes wait, the source holding the most samples
+    loses its oldest ones, or the new sample when it is that source's ("overload"). All counted,
+    so memory stays bounded, Zenoh is never blocked, and one source's flood costs only that
+    source. `batch_max` samples are processed per tracker call, taken round-robin across sources.
+    `drain_deadline_s`: at shutdown, the queue is drained for at most this long; what is left is
+    dropped and counted as "shutdown" (the recording is then closed complete)."""
 
     queue_max: Annotated[int, msgspec.Meta(ge=1)] = 200_000
+    queue_max_bytes: Annotated[int, msgspec.Meta(ge=1)] = 256_000_000
+    max_message_bytes: Annotated[int, msgspec.Meta(ge=1)] = 65_536
+    source_rate_hz: NonNegFloat = 0.0
+    source_burst: Annotated[int, msgspec.Meta(ge=1)] = 1000
     batch_max: Annotated[int, msgspec.Meta(ge=1)] = 5_000
+    drain_deadline_s: NonNegFloat = 10.0
     max_future_wall_s: PosFloat = 3600.0  # refuse sensor times this far ahead of the wall clock
+
+    def __post_init__(self) -> None:
+        if self.max_message_bytes >= self.queue_max_bytes:
+            raise ValueError("intake.max_message_bytes must be smaller than intake.queue_max_bytes")
+
+
+class CheckpointConfig(Section):
+    """[checkpoint]: the tracker's state written atomically every `interval_s` and at shutdown,
+    and resumed at start (same track ids; the status says how old the checkpoint was). path ""
+    is <recording.directory>/<recording.prefix>.checkpoint for a service with rotating
+    recordings, and no checkpoint for a one-file run (fusion demo) unless a path is given. A
+    checkpoint that cannot be used is moved aside and the service starts clean
+    (fusion.io.checkpointer)."""
+
+    enabled: bool = True
+    path: str = ""
+    interval_s: PosFloat = 10.0
 
 
 class PublicationConfig(Section):
@@ -344,6 +381,7 @@ class ServiceConfig(Section):
     zenoh: ZenohConfig = ZenohConfig()
     recording: RecordingConfig = RecordingConfig()
     intake: IntakeConfig = IntakeConfig()
+    checkpoint: CheckpointConfig = CheckpointConfig()
     publication: PublicationConfig = PublicationConfig()
     publish_tentative: bool = False
     warnings_per_minute: Annotated[int, msgspec.Meta(ge=1)] = 60

@@ -1,9 +1,10 @@
 """The fusion service: Zenoh in, tracker, estimates out over Zenoh, every step to Rerun.
 
-Threads: Zenoh's callback threads only append (arrival_ns, key, payload) to a bounded deque and
-wake the loop; the thread that calls `run` owns the tracker and does everything else. When
-`intake.queue_max` samples wait, new measurement samples are refused with reason "overload"
-(counted), so memory stays bounded and a Zenoh channel is never left undrained.
+Threads: Zenoh's callback threads only offer (arrival_ns, key, payload) to the intake queue
+(fusion.io.intake_queue: a byte limit per message checked before the payload is copied, bounds
+in samples and bytes, per-source rate limits and fair queueing, every refusal counted by reason)
+and wake the loop; the thread that calls `run` owns the tracker and does everything else, so
+memory stays bounded and a Zenoh channel is never left undrained.
 
 Queryables (answers prepared by the loop, so callbacks never touch the tracker):
   fusion/<ns>/status     ServiceStatus (msgpack)
@@ -13,7 +14,8 @@ Publications: fusion/<ns>/tracks/<id> (estimates), fusion/<ns>/events/<id> (conf
 coasting, deleted with the reason, withdrawals; fusion.publication) and, with [publication]
 period_s, fusion/<ns>/predicted (fusion.prediction); with smooth_lag, fusion/<ns>/smoothed/<id>
 (fusion.fixed_lag).
-Shutdown (SIGINT, SIGTERM or stop()): stop intake, drain the queue, flush and close the
+Shutdown (SIGINT, SIGTERM or stop()): stop intake, drain the queue for at most
+intake.drain_deadline_s (the rest dropped, counted as "shutdown"), flush and close the
 recording and the stream file, close the Zenoh session.
 """
 
@@ -32,14 +34,18 @@ from fusion import messages as m
 from fusion.config import ServiceConfig
 from fusion.fixed_lag import FixedLagSmoother, smoothed_key
 from fusion.io import wire
+from fusion.io.checkpointer import Checkpointer, counts_since, service_checkpoint_path
+from fusion.io.intake_queue import IntakeLimits, IntakeQueue
 from fusion.io.recording import RotatingSink
+from fusion.io.recording_guard import GuardedSink
 from fusion.io.rerun_sink import RerunSink
+from fusion.io.stream_rotation import Retention, RotatingStream
 from fusion.io.zenoh_advanced import RecoveringSubscription
 from fusion.io.zenoh_bus import connection_of, open_with_retry
 from fusion.pipeline import Pipeline, Record
 from fusion.prediction import Cadence, encode_predicted, predicted_key, snapshot_time
 from fusion.tracking.detection import Reason
-from fusion.tracking.results import Estimate
+from fusion.tracking.results import Counts, Estimate
 from fusion.tracking.tracker import Tracker
 
 log = logging.getLogger("fusion.service")
@@ -58,20 +64,30 @@ class Service:
         self._zenoh = zenoh
         self.config = config
         self.ns = config.namespace
-        self.tracker = Tracker(config.tracker)
+        cp = service_checkpoint_path(config.checkpoint, config.recording, recording_dir=recording_dir,
+                                     one_file=recording_path is not None)
+        self.checkpoints = None if cp is None else Checkpointer(cp, interval_s=config.checkpoint.interval_s)
+        self.tracker = Tracker(config.tracker)  # the checkpoint's state, if any, is restored into it by open()
         self.sink: RotatingSink | RerunSink | None = None
-        self.stream: Any = None
+        self.stream: RotatingStream | None = None
+        self._guard: GuardedSink | None = None
+        self._retention: Retention | None = None
         self._outputs = (recording_dir, recording_path, stream_path)  # files are created by open()
         self.pipeline = Pipeline(
             self.tracker, wire.Codec(self.ns), sink=None,
             max_future_wall_ns=round(config.intake.max_future_wall_s * 1e9),
             publish_tentative=config.publish_tentative, warnings_per_minute=config.warnings_per_minute,
         )
-        self._q: deque[Record] = deque()
+        ic = config.intake
+        known = [s.id for s in config.tracker.sensors] + ([config.tracker.control.source_id]
+                                                         if config.tracker.control is not None else [])
+        self._base_counts = self.pipeline.counts()  # what a resumed tracker carried in: not this run's
+        self._q = IntakeQueue(IntakeLimits(queue_max=ic.queue_max, queue_max_bytes=ic.queue_max_bytes,
+                                           max_message_bytes=ic.max_message_bytes, rate_hz=ic.source_rate_hz,
+                                           burst=ic.source_burst), known=known)
+        self._shutdown_dropped = 0
         self._wake = threading.Event()
         self._stop = threading.Event()
-        self._arrived = 0  # samples seen by the callback, any key (written by Zenoh threads only)
-        self._overload = 0
         self._processed = 0
         self._settled = 0  # samples fully handled (published, status refreshed) when the queue last emptied
         self._started_ns = time.time_ns()
@@ -94,15 +110,16 @@ class Service:
         self._linked = True  # a client: connected to its peer or router when last looked
         self._reconnects = 0
 
+    @property
+    def intake(self) -> IntakeQueue:
+        """The intake queue (read its counts and depth; fusion.io.intake_queue)."""
+        return self._q
+
     # ---- Zenoh side ----------------------------------------------------------------------------
     def _on_sample(self, sample: Any) -> None:
-        key = str(sample.key_expr)
-        self._arrived += 1
-        if wire.is_measurement_key(key) and len(self._q) >= self.config.intake.queue_max:
-            self._overload += 1
-            return
-        self._q.append((time.time_ns(), key, sample.payload.to_bytes()))
-        self._wake.set()
+        payload = sample.payload
+        if self._q.offer(time.time_ns(), str(sample.key_expr), len(payload), payload.to_bytes) is None:
+            self._wake.set()
 
     def _on_status(self, query: Any) -> None:
         query.reply(wire.status_key(self.ns), self._status_payload)
@@ -145,12 +162,21 @@ class Service:
         elif rc.enabled:
             self.sink = RotatingSink(rdir, prefix=rc.prefix, rotate_bytes=int(rc.rotate_mb * 1e6),
                                      rotate_s=rc.rotate_s, **common)
+        rotating = self.sink if isinstance(self.sink, RotatingSink) else None
         if stream_path is not None or (self.sink is not None and rc.stream):
-            from fusion.io.streamfile import StreamWriter
-
             sp = Path(stream_path) if stream_path is not None else self.sink.path.with_suffix(wire.STREAM_SUFFIX)  # type: ignore[union-attr]
-            self.stream = StreamWriter(sp, namespace=self.ns)
-        self.pipeline.sink = self.sink
+            follow = None if rotating is None or stream_path is not None else (lambda: rotating.path)
+            self.stream = RotatingStream(sp, namespace=self.ns, rotate_bytes=int(rc.rotate_mb * 1e6), follow=follow)
+        if rotating is not None:
+            self._retention = Retention(rdir, prefix=rc.prefix, keep_files=rc.keep_files,
+                                        keep_bytes=int(rc.keep_mb * 1e6))
+        self._guard = None if self.sink is None else GuardedSink(self.sink)
+        self.pipeline.sink = self._guard
+
+    def _resume(self) -> None:
+        """Restore a usable checkpoint into the tracker, in place (fusion.io.checkpointer)."""
+        if self.checkpoints is not None and self.checkpoints.resume(self.tracker):
+            self._base_counts = self.pipeline.counts()
 
     def open(self) -> None:
         """Open the Zenoh session, then the output files, then declare the subscribers and
@@ -160,6 +186,7 @@ class Service:
         if self.session is None:  # stopped while connecting: nothing was opened
             return
         try:
+            self._resume()
             self._open_outputs()
         except BaseException:
             if self.sink is not None:
@@ -185,11 +212,7 @@ class Service:
         self._wake.set()
 
     def _drain(self, limit: int) -> list[Record]:
-        q = self._q
-        out = []
-        while q and len(out) < limit:
-            out.append(q.popleft())
-        return out
+        return self._q.drain(limit)
 
     def _step(self, batch: list[Record]) -> None:
         if self.stream is not None:
@@ -236,13 +259,17 @@ class Service:
                     self._step(batch)
                     if not self._q:  # caught up: make the status answer current at once
                         self._refresh_status(force=True)
-                        self._settled = self._processed + self._overload
+                        self._settled = self._processed + self._q.refused_total
                 else:
                     self._wake.wait(0.05)
                     self._wake.clear()
                 self._answer_queries()
-                if self.sink is not None:
-                    self.sink.maybe_flush()
+                if self._guard is not None:
+                    self._guard.maybe_flush()
+                if self._retention is not None:
+                    self._retention.maybe_sweep(self._open_files())
+                if self.checkpoints is not None:
+                    self.checkpoints.maybe_write(self.tracker)
                 self._refresh_status()
         finally:
             self.shutdown()
@@ -254,35 +281,62 @@ class Service:
             return
         for d in self._decls[:3]:  # subscribers: no more intake
             d.undeclare()
-        while self._q:
+        deadline = time.monotonic() + self.config.intake.drain_deadline_s
+        while self._q and time.monotonic() < deadline:
             self._step(self._drain(self.config.intake.batch_max))
+        left = self._drain(len(self._q)) if self._q else []
+        if left:
+            self._shutdown_dropped += len(left)
+            log.warning("shutdown: drain deadline of %.1f s reached, %d queued samples dropped (counted as "
+                        "'shutdown')", self.config.intake.drain_deadline_s, len(left))
+            if self._guard is not None:  # a row to flush, so that the final counts reach the recording
+                self._guard.log_text(0, f"shutdown: drain deadline reached, {len(left)} queued samples dropped",
+                                     "WARN")
+        if self.checkpoints is not None:
+            self.checkpoints.write(self.tracker)
         self._refresh_status(force=True)
         self._answer_queries()
         for d in self._decls[3:]:
             d.undeclare()
         self._decls = []
-        if self.sink is not None:
-            self.sink.close()
+        if self._guard is not None:
+            self._guard.close()
         if self.stream is not None:
             self.stream.close()
+        if self._retention is not None:
+            self._retention.sweep(self._open_files())
         self.session.close()
         self.session = None
         log.info("fusion service stopped: %s", self.status_dict()["counts"])
 
     # ---- status --------------------------------------------------------------------------------
     def _counts_for_recording(self) -> dict[str, int]:
-        c = self.pipeline.counts().flat()
-        c["refused/overload"] = self._overload
+        c = self._run_counts().flat()
+        for reason, n in self._intake_refused().items():
+            c[f"refused/{reason}"] = n
         return c
+
+    def _run_counts(self) -> Counts:
+        """This run's counts (a resumed tracker's carried-in counts taken off)."""
+        return counts_since(self.pipeline.counts(), self._base_counts)
+
+    def _intake_refused(self) -> dict[str, int]:
+        """Refusals before decoding, by reason: the intake queue's, and samples dropped at shutdown."""
+        out = dict(self._q.refused)
+        if self._shutdown_dropped:
+            out["shutdown"] = self._shutdown_dropped
+        return out
 
     def status_dict(self) -> dict[str, Any]:
         """Counts add up: received = applied + truth + duplicates + sum(refused) + queued."""
-        c = self.pipeline.counts()
+        c = self._run_counts()
         refused = {r.value: n for r, n in c.refused.items() if r != Reason.DUPLICATE}
-        if self._overload:
-            refused["overload"] = self._overload
-        arrived = self._arrived
-        queued = arrived - self._overload - self._processed
+        intake = self._intake_refused()
+        for reason, n in intake.items():
+            refused[reason] = refused.get(reason, 0) + n
+        refused = dict(sorted(refused.items()))
+        arrived = self._q.offered
+        queued = arrived - sum(intake.values()) - self._processed
         by_status: dict[str, int] = {}
         for t in self.tracker.tracks:
             by_status[t.status.label] = by_status.get(t.status.label, 0) + 1
@@ -301,6 +355,8 @@ class Service:
             "queue_depth": len(self._q),
             "gaps": self._gaps(),
             "zenoh": self._link(),
+            "recording_error": self._recording_error(),
+            "checkpoint": None if self.checkpoints is None else self.checkpoints.status(),
         }
 
     def _link(self) -> dict[str, Any]:
@@ -332,6 +388,13 @@ class Service:
                 row["zenoh_missed"] = row.get("zenoh_missed", 0) + n
         return dict(sorted(out.items()))
 
+    def _open_files(self) -> tuple[Path, ...]:
+        return tuple(p.path for p in (self.sink, self.stream) if p is not None)
+
+    def _recording_error(self) -> str | None:
+        errors = [g.error for g in (self._guard, self.stream) if g is not None and g.error]
+        return "; ".join(errors) or None
+
     def _recording_bytes(self) -> int:
         if isinstance(self.sink, RotatingSink):
             return self.sink.size_bytes()
@@ -343,7 +406,7 @@ class Service:
         deadline = time.monotonic() + timeout_s
         last, since = -1, time.monotonic()
         while time.monotonic() < deadline:
-            n = self._arrived
+            n = self._q.offered
             if n != last or self._q:
                 last, since = n, time.monotonic()
             elif time.monotonic() - since >= quiet_s and self._settled >= n:

@@ -57,7 +57,7 @@ def _radar(spec: SimulatedRadar, pos: np.ndarray, vel: np.ndarray | None, rng: n
     if spec.range_rate and vel is not None:
         kw["range_rate_mps"] = float((pos - pose.t) @ vel / r + rng.normal(0, spec.range_rate_std_mps))
         kw["range_rate_std_mps"] = spec.range_rate_std_mps  # type: ignore[assignment]
-    return m.Radar(range_m=max(r + rng.normal(0, spec.range_std_m), 1e-3), bearing_rad=b,
+    return m.Radar(range_m=max(r + rng.normal(0, spec.range_std_m), m.MIN_RANGE_M), bearing_rad=b,
                    range_std_m=spec.range_std_m, bearing_std_rad=spec.bearing_std_rad, **kw)
 
 

@@ -9,7 +9,7 @@ import pytest
 
 pytest.importorskip("stonesoup")
 
-from bench import gospa  # noqa: E402
+from bench import gospa
 
 
 @pytest.mark.parametrize("kind", ["cartesian", "radar"])

@@ -139,7 +139,8 @@ def run(prog: str, parser: argparse.ArgumentParser, argv: list[str] | None,
         _silence_stdout()
         return Exit.BROKEN_PIPE
     except (KeyboardInterrupt, Exception) as e:
-        err = CliError(Exit.INTERRUPTED, "interrupted") if isinstance(e, KeyboardInterrupt) else classify(e, where=where)
+        err = (CliError(Exit.INTERRUPTED, "interrupted") if isinstance(e, KeyboardInterrupt)
+               else classify(e, where=where))
         if debug and not (isinstance(e, CliError) and e.code == Exit.USAGE):
             traceback.print_exc()
         try:

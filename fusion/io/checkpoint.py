@@ -20,7 +20,7 @@ import msgspec
 
 from fusion.config import TrackerConfig
 from fusion.errors import ConfigError, FusionError
-from fusion.tracking.checkpoint import TrackerState
+from fusion.tracking.checkpoint import TrackerState, restore
 from fusion.tracking.tracker import Tracker
 
 MAGIC = b"FUSIONCK1\n"
@@ -65,8 +65,11 @@ class Resumed:
     tracks: int
 
 
-def read_checkpoint(path: str | Path, config: TrackerConfig, *, now_wall_ns: int | None = None) -> Resumed | None:
-    """The tracker a checkpoint holds; None when there is none; CheckpointError when unusable."""
+def read_checkpoint(path: str | Path, config: TrackerConfig, *, now_wall_ns: int | None = None,
+                    into: Tracker | None = None) -> Resumed | None:
+    """The tracker a checkpoint holds; None when there is none; CheckpointError when unusable.
+    `into`: a freshly built tracker of `config` to restore in place (others may hold it), once the
+    checkpoint has restored cleanly into a scratch one; it is left untouched when it cannot."""
     p = Path(path)
     try:
         data = p.read_bytes()
@@ -84,5 +87,8 @@ def read_checkpoint(path: str | Path, config: TrackerConfig, *, now_wall_ns: int
         tracker = Tracker.resume(config, cf.state)
     except (ConfigError, ValueError) as e:
         raise CheckpointError(f"{p}: {e}") from None
+    if into is not None:
+        restore(into, cf.state)
+        tracker = into
     age = ((now_wall_ns or time.time_ns()) - cf.written_wall_ns) / 1e9
     return Resumed(tracker, age, len(tracker.track_set))

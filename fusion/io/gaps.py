@@ -33,7 +33,7 @@ class SensorGaps:
 class _Run:
     """The seen range and missing intervals of one (sensor, epoch)."""
 
-    __slots__ = ("lo", "hi", "starts", "ends", "given_up", "filled")
+    __slots__ = ("ends", "filled", "given_up", "hi", "lo", "starts")
 
     def __init__(self, seq: int) -> None:
         self.lo = self.hi = seq

@@ -4,8 +4,8 @@ Format (little-endian):
     header   b"FUSIONST" | u16 format version (1) | u32 n | n bytes of JSON metadata
     frame*   u32 n | u32 crc32(body) | body: msgpack [arrival_ns: int, key: str, payload: bytes]
 Frames are appended with one unbuffered write each, so a crash costs at most the frame being
-written; the reader detects a cut or corrupt last frame, skips it, and reports it (a warning,
-and `StreamReader.truncated`). A corrupt header raises StreamFormatError.
+written; the reader detects a cut or corrupt last frame, skips it, and reports it (one line
+through logging, "fusion.stream", and `StreamReader.truncated`). A corrupt header raises StreamFormatError.
 
 `read_records(path)` also accepts `.jsonl`: one JSON message per line (fusion.messages, as
 written by `encode_json`); the arrival time of a line is its t_ns.
@@ -14,9 +14,9 @@ written by `encode_json`); the arrival time of a line is its t_ns.
 from __future__ import annotations
 
 import json
+import logging
 import struct
 import time
-import warnings
 import zlib
 from collections.abc import Iterator
 from pathlib import Path
@@ -35,6 +35,7 @@ _enc = msgspec.msgpack.Encoder()
 _dec = msgspec.msgpack.Decoder(tuple[int, str, bytes])
 
 Record = tuple[int, str, bytes]
+log = logging.getLogger("fusion.stream")
 
 
 class StreamFormatError(InputError):
@@ -104,8 +105,8 @@ class StreamReader:
         if pos < end:
             self.truncated = True
             self.trailing_bytes = end - pos
-            warnings.warn(f"{self.path}: skipped a partial or corrupt last frame ({end - pos} bytes at offset {pos})",
-                          stacklevel=2)
+            log.warning("%s: skipped a partial or corrupt last frame (%d bytes at offset %d): the recording was cut "
+                        "short, the records before it are complete", self.path, end - pos, pos)
 
 
 def read_jsonl(path: str | Path, *, namespace: str) -> Iterator[Record]:

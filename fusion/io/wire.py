@@ -115,6 +115,8 @@ def encode_status(status: dict[str, Any]) -> bytes:
         recording=status["recording"], recording_bytes=status["recording_bytes"], queue_depth=status["queue_depth"],
         gaps={k: m.SeqGapStats(**v) for k, v in status.get("gaps", {}).items()},
         zenoh=m.ZenohLink(**status["zenoh"]) if status.get("zenoh") else None,
+        checkpoint=m.CheckpointStatus(**status["checkpoint"]) if status.get("checkpoint") else None,
+        recording_error=status.get("recording_error"),
     )
     return m.encode(msg)
 

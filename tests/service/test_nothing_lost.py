@@ -13,20 +13,19 @@ import numpy as np
 import pytest
 
 from fusion import messages as m
-from fusion.config import TimeConfig
 from fusion.cli.report import format_status
 from fusion.cli.runner import Exit, explain_zenoh
+from fusion.config import TimeConfig, ZenohConfig
 from fusion.io import wire
 from fusion.io.gaps import SensorGaps, SeqGaps
 from fusion.io.query import query_status
-from fusion.config import ZenohConfig
 from fusion.io.zenoh_advanced import declare_recoverable_publisher, wait_for_recovering_subscriber
 from fusion.io.zenoh_bus import free_tcp_port, session_config, wait_for_match, zenoh_json
 from fusion.service import Service
 from fusion.tracking.detection import Detection, Reason
-from tests.tracking.test_refusals import CART, S
 from tests.service.harness import client, running_service, scenario_config
 from tests.tracking.helpers import make_tracker
+from tests.tracking.test_refusals import CART, S
 
 SEED = 1313
 WIDE = TimeConfig(lag_s=10.0, future_s=10.0)  # every burst below stays inside the window

@@ -150,7 +150,7 @@ def test_refused_births_do_not_depend_on_arrival_order(draw: tuple[list[int], li
 def test_refused_births_with_replays() -> None:
     """One seeded draw that does replay, so the property above cannot pass vacuously."""
     rng = np.random.default_rng(SEED + 2)
-    tracker, consumer = run(arrival_order(rng.integers(0, LAG_MS, size=len(stream())).tolist()), [2], SMALL)
+    tracker, _ = run(arrival_order(rng.integers(0, LAG_MS, size=len(stream())).tolist()), [2], SMALL)
     ref_tracks, ref_tracker, _ = reference_small()
     assert tracker.counts.replayed_scans > 10 and ref_tracker.counts.births_refused_capacity > 0
     assert data_counts(tracker) == data_counts(ref_tracker)

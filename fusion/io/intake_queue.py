@@ -1,0 +1,187 @@
+"""The intake queue between Zenoh's callback threads and the tracker thread: bounded in samples
+and in bytes, a byte limit per message, per-source rate limits and fair queueing.
+
+Every sample, whatever its key, goes through `offer(arrival_ns, key, size, payload_fn)`:
+  1. size > max_message_bytes: refused "too_large", before its bytes are copied or decoded;
+  2. its source over its rate (a token bucket of `rate_hz`, `burst` deep, per source): refused
+     "rate_limited";
+  3. the queue full (queue_max samples, or queue_max_bytes bytes with this one): the source that
+     holds the most samples pays. If that is the sample's own source, the sample is refused
+     "overload"; otherwise the biggest source's oldest samples are dropped ("overload", counted
+     against it) until the new one fits. A flood from one source therefore costs that source
+     alone: the others keep their place in the queue.
+`drain(limit)` takes samples round-robin across sources (one from each in turn, sources in
+sorted order), then returns them sorted by arrival time, so that the tracker still sees arrival
+order within a batch while no source can take a whole batch while another waits.
+
+Sources (the fairness classes) are bounded in number: a measurement or input key whose id is a
+configured source is its own class ("meas/cam1"); every truth key shares "truth"; every other
+key (unknown sensors, wildcard puts) shares "other". Memory per sample is counted as payload +
+key + RECORD_OVERHEAD_BYTES (the Python objects around them).
+
+Counts (`refused`, by reason, and `refused_by_source`) are what was offered and never handed
+out: offered = handed out + sum(refused) + len(queue). One lock guards everything: `offer`
+runs on Zenoh's threads, `drain` on the tracker's.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections import Counter, deque
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass
+
+Record = tuple[int, str, bytes]
+RECORD_OVERHEAD_BYTES = 160  # tuple, int, str and bytes headers of one queued record (CPython 3.11, measured)
+
+TOO_LARGE = "too_large"
+RATE_LIMITED = "rate_limited"
+OVERLOAD = "overload"
+
+
+@dataclass(frozen=True)
+class IntakeLimits:
+    """queue_max samples and queue_max_bytes bytes in the queue; max_message_bytes per payload;
+    rate_hz (0: no limit) and burst per source."""
+
+    queue_max: int
+    queue_max_bytes: int
+    max_message_bytes: int
+    rate_hz: float = 0.0
+    burst: int = 1
+
+    def __post_init__(self) -> None:
+        if self.queue_max < 1 or self.queue_max_bytes < 1 or self.max_message_bytes < 1:
+            raise ValueError("queue_max, queue_max_bytes and max_message_bytes must be at least 1")
+        if self.rate_hz < 0 or self.burst < 1:
+            raise ValueError("rate_hz must be >= 0 and burst >= 1")
+
+
+def source_class(key: str, known: frozenset[str]) -> str:
+    """The fairness class of a key expression fusion/NS/KIND/ID (see the module docstring)."""
+    parts = key.split("/")
+    if len(parts) == 4 and parts[2] in ("meas", "input") and parts[3] in known:
+        return f"{parts[2]}/{parts[3]}"
+    if len(parts) == 4 and parts[2] == "truth":
+        return "truth"
+    return "other"
+
+
+class IntakeQueue:
+    """See the module docstring. `known`: the configured sensor and control-source ids."""
+
+    def __init__(self, limits: IntakeLimits, *, known: Iterable[str],
+                 clock: Callable[[], float] = time.monotonic) -> None:
+        self.limits = limits
+        self._known = frozenset(known)
+        self._clock = clock
+        self._lock = threading.Lock()
+        self._queues: dict[str, deque[tuple[Record, int]]] = {}
+        self._order: list[str] = []  # sorted class names with a queue
+        self._next = 0  # round-robin position in _order
+        self._len = 0
+        self._bytes = 0
+        self._bucket: dict[str, tuple[float, float]] = {}  # class -> (tokens, time of last refill)
+        self.offered = 0
+        self.handed_out = 0
+        self.refused: Counter[str] = Counter()
+        self.refused_by_source: Counter[str] = Counter()
+        self.max_depth = 0
+        self.max_bytes = 0
+
+    def __len__(self) -> int:
+        return self._len
+
+    @property
+    def nbytes(self) -> int:
+        return self._bytes
+
+    @property
+    def refused_total(self) -> int:
+        return sum(self.refused.values())
+
+    def depth_by_source(self) -> dict[str, int]:
+        with self._lock:
+            return {c: len(q) for c, q in sorted(self._queues.items()) if q}
+
+    def _refuse(self, cls: str, reason: str, n: int = 1) -> None:
+        self.refused[reason] += n
+        self.refused_by_source[f"{cls}:{reason}"] += n
+
+    def _rate_ok(self, cls: str) -> bool:
+        rate, burst = self.limits.rate_hz, float(self.limits.burst)
+        if rate <= 0:
+            return True
+        now = self._clock()
+        tokens, last = self._bucket.get(cls, (burst, now))
+        tokens = min(burst, tokens + (now - last) * rate)
+        if tokens < 1.0:
+            self._bucket[cls] = (tokens, now)
+            return False
+        self._bucket[cls] = (tokens - 1.0, now)
+        return True
+
+    def offer(self, arrival_ns: int, key: str, size: int, payload: Callable[[], bytes]) -> str | None:
+        """Queue one sample; None when queued, else the reason it was refused. `payload` is
+        called (the bytes copied) only once the sample is admitted."""
+        cls = source_class(key, self._known)
+        lim = self.limits
+        with self._lock:
+            self.offered += 1
+            if size > lim.max_message_bytes:
+                self._refuse(cls, TOO_LARGE)
+                return TOO_LARGE
+            if not self._rate_ok(cls):
+                self._refuse(cls, RATE_LIMITED)
+                return RATE_LIMITED
+            cost = size + len(key) + RECORD_OVERHEAD_BYTES
+            while self._len + 1 > lim.queue_max or self._bytes + cost > lim.queue_max_bytes:
+                victim = self._biggest()
+                if victim is None or victim == cls or len(self._queues[victim]) <= len(self._queues.get(cls, ())):
+                    self._refuse(cls, OVERLOAD)
+                    return OVERLOAD
+                _, vcost = self._queues[victim].popleft()
+                self._len -= 1
+                self._bytes -= vcost
+                self._refuse(victim, OVERLOAD)
+            q = self._queues.get(cls)
+            if q is None:
+                q = self._queues[cls] = deque()
+                self._order = sorted(self._queues)
+            q.append(((arrival_ns, key, payload()), cost))
+            self._len += 1
+            self._bytes += cost
+            self.max_depth = max(self.max_depth, self._len)
+            self.max_bytes = max(self.max_bytes, self._bytes)
+            return None
+
+    def _biggest(self) -> str | None:
+        """The class with the most samples queued (ties: the first in sorted order)."""
+        best, n = None, 0
+        for c in self._order:
+            if len(self._queues[c]) > n:
+                best, n = c, len(self._queues[c])
+        return best
+
+    def drain(self, limit: int) -> list[Record]:
+        """Up to `limit` samples, round-robin across sources, returned in arrival order."""
+        out: list[Record] = []
+        with self._lock:
+            order = self._order
+            k = len(order)
+            idle = 0
+            while len(out) < limit and self._len and idle < k:
+                q = self._queues[order[self._next % k]]
+                self._next = (self._next + 1) % k
+                if not q:
+                    idle += 1
+                    continue
+                idle = 0
+                rec, cost = q.popleft()
+                out.append(rec)
+                self._len -= 1
+                self._bytes -= cost
+            self.handed_out += len(out)
+        out.sort(key=lambda r: r[0])
+        return out

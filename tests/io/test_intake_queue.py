@@ -1,0 +1,132 @@
+"""The intake queue alone: byte limit, bounds in samples and bytes, rate limits, fairness."""
+
+from __future__ import annotations
+
+import threading
+
+import pytest
+
+from fusion.io.intake_queue import RECORD_OVERHEAD_BYTES, IntakeLimits, IntakeQueue, source_class
+
+KNOWN = ("cam1", "radar1")
+
+
+def key(kind: str, ident: str) -> str:
+    return f"fusion/demo/{kind}/{ident}"
+
+
+def offer(q: IntakeQueue, t: int, k: str, payload: bytes = b"x" * 10) -> str | None:
+    return q.offer(t, k, len(payload), lambda: payload)
+
+
+def adds_up(q: IntakeQueue) -> bool:
+    return q.offered == q.handed_out + q.refused_total + len(q)
+
+
+@pytest.mark.parametrize(("k", "cls"), [
+    (key("meas", "cam1"), "meas/cam1"), (key("meas", "ghost"), "other"), (key("truth", "x"), "truth"),
+    (key("truth", "y"), "truth"), ("fusion/demo/meas/*", "other"), ("fusion/demo/**", "other"),
+    (key("input", "cam1"), "input/cam1"), ("fusion/demo/meas/cam1/x", "other"),
+], ids=str)
+def test_source_classes_are_bounded_in_number(k: str, cls: str) -> None:
+    assert source_class(k, frozenset(KNOWN)) == cls
+
+
+def test_a_payload_over_the_byte_limit_is_refused_without_being_copied() -> None:
+    q = IntakeQueue(IntakeLimits(queue_max=10, queue_max_bytes=10**6, max_message_bytes=100), known=KNOWN)
+
+    def never() -> bytes:
+        raise AssertionError("the payload of a refused sample was copied")
+
+    assert q.offer(1, key("meas", "cam1"), 101, never) == "too_large"
+    assert offer(q, 2, key("meas", "cam1"), b"y" * 100) is None
+    assert q.refused == {"too_large": 1} and len(q) == 1 and adds_up(q)
+
+
+@pytest.mark.parametrize("kind", ["truth", "meas", "other"], ids=str)
+def test_every_key_is_bounded_in_samples(kind: str) -> None:
+    q = IntakeQueue(IntakeLimits(queue_max=50, queue_max_bytes=10**9, max_message_bytes=1000), known=KNOWN)
+    k = {"truth": key("truth", "x"), "meas": key("meas", "cam1"), "other": "fusion/demo/meas/*"}[kind]
+    for i in range(1000):
+        offer(q, i, k)
+    assert len(q) == 50 and q.max_depth == 50
+    assert q.refused == {"overload": 950} and adds_up(q)
+    assert [r[0] for r in q.drain(1000)] == list(range(50)), "the oldest are kept, the newcomers refused"
+
+
+def test_the_queue_is_bounded_in_bytes() -> None:
+    cost = 1000 + len(key("truth", "x")) + RECORD_OVERHEAD_BYTES
+    q = IntakeQueue(IntakeLimits(queue_max=10**6, queue_max_bytes=10 * cost, max_message_bytes=5000), known=KNOWN)
+    for i in range(100):
+        offer(q, i, key("truth", "x"), b"z" * 1000)
+    assert len(q) == 10 and q.nbytes == 10 * cost and q.max_bytes <= 10 * cost
+    assert q.refused == {"overload": 90} and adds_up(q)
+
+
+def test_a_flood_costs_only_the_flooding_source() -> None:
+    """radar1 fills the queue; cam1's samples then evict radar1's oldest, never the reverse."""
+    q = IntakeQueue(IntakeLimits(queue_max=100, queue_max_bytes=10**9, max_message_bytes=1000), known=KNOWN)
+    for i in range(5000):
+        offer(q, i, key("meas", "radar1"))
+    for i in range(20):
+        assert offer(q, 10_000 + i, key("meas", "cam1")) is None
+    assert len(q) == 100 and q.depth_by_source() == {"meas/cam1": 20, "meas/radar1": 80}
+    assert q.refused_by_source == {"meas/radar1:overload": 4920}
+    assert adds_up(q)
+
+
+def test_drain_is_round_robin_and_in_arrival_order() -> None:
+    q = IntakeQueue(IntakeLimits(queue_max=10**4, queue_max_bytes=10**9, max_message_bytes=1000), known=KNOWN)
+    for i in range(1000):
+        offer(q, i, key("meas", "radar1"))
+    for i in range(5):
+        offer(q, 2000 + i, key("meas", "cam1"))
+    batch = q.drain(10)
+    assert [r[0] for r in batch] == sorted(r[0] for r in batch)
+    assert sum(1 for r in batch if r[1].endswith("cam1")) == 5, "cam1 waited behind radar1's flood"
+    assert len(q.drain(10**6)) == 995 and len(q) == 0 and adds_up(q)
+
+
+def test_the_rate_limit_is_per_source() -> None:
+    now = [0.0]
+    q = IntakeQueue(IntakeLimits(queue_max=10**6, queue_max_bytes=10**9, max_message_bytes=1000, rate_hz=100.0,
+                                 burst=10), known=KNOWN, clock=lambda: now[0])
+    got = [offer(q, i, key("meas", "radar1")) for i in range(50)]
+    assert got.count(None) == 10 and got.count("rate_limited") == 40
+    assert offer(q, 99, key("meas", "cam1")) is None, "cam1 is not limited by radar1's rate"
+    now[0] = 0.05  # 5 tokens back
+    got = [offer(q, 100 + i, key("meas", "radar1")) for i in range(10)]
+    assert got.count(None) == 5
+    assert adds_up(q)
+
+
+def test_offer_and_drain_from_many_threads_add_up() -> None:
+    q = IntakeQueue(IntakeLimits(queue_max=500, queue_max_bytes=10**9, max_message_bytes=1000), known=KNOWN)
+    got: list[int] = []
+    stop = threading.Event()
+
+    def drainer() -> None:
+        while not stop.is_set() or len(q):
+            got.extend(r[0] for r in q.drain(64))
+
+    def producer(k: str, base: int) -> None:
+        for i in range(5000):
+            offer(q, base + i, k)
+
+    d = threading.Thread(target=drainer)
+    d.start()
+    ps = [threading.Thread(target=producer, args=(key("meas", s), 10**6 * j)) for j, s in enumerate(KNOWN + ("x",))]
+    for p in ps:
+        p.start()
+    for p in ps:
+        p.join()
+    stop.set()
+    d.join()
+    assert q.offered == 15_000 and len(got) + q.refused_total == 15_000 and len(set(got)) == len(got)
+
+
+def test_limits_are_checked() -> None:
+    with pytest.raises(ValueError):
+        IntakeLimits(queue_max=0, queue_max_bytes=1, max_message_bytes=1)
+    with pytest.raises(ValueError):
+        IntakeLimits(queue_max=1, queue_max_bytes=1, max_message_bytes=1, rate_hz=-1.0)
