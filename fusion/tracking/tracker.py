@@ -26,7 +26,7 @@ from fusion.errors import ConfigError
 from fusion.tracking.checkpoint import TrackerState, restore, state_of
 from fusion.tracking.controls import InputTimeline
 from fusion.tracking.detection import ControlInput, Detection, Reason, Refusal
-from fusion.tracking.gating import make_gater
+from fusion.tracking.batched_gating import make_gater
 from fusion.tracking.history import Entry, History, Rewind, revise, revise_events
 from fusion.tracking.intake import Intake
 from fusion.tracking.lifecycle import Lifecycle

@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from fusion.config import ModeConfig, MotionConfig, TrackerConfig
-from fusion.tracking.gating import BatchedGate, BatchedIMMGate, PerPairGate
+from fusion.tracking.batched_gating import BatchedGate, BatchedIMMGate
+from fusion.tracking.gating import PerPairGate
 from fusion.tracking.tracker import Tracker
 from tests.tracking.streams import Sensor, constant_velocity, detect, in_order, scans
 
