@@ -129,11 +129,11 @@ class Gater(Protocol):
 
 
 class Kept:
-    """Collects kept pairs: (track, measurement, NIS, cost, limit) and where each answer lives."""
+    """Collects kept pairs: (track, measurement, NIS, cost, limit) and where each answer lives,
+    as one block of columns per part."""
 
     def __init__(self) -> None:
-        self.rows: list[tuple[int, int, float, float, float]] = []
-        self.where: list[tuple[int, int]] = []
+        self.blocks: list[tuple[np.ndarray, ...]] = []  # ti, mj, nis, cost, limit, part, row
         self.parts: list[Part] = []
         self.skips = 0
 
@@ -142,26 +142,26 @@ class Kept:
         """Pairs (ti[k], mj[k]) answered by row k of `part`; the ones inside the gate are kept."""
         cost = -2.0 * ll - dim * LOG_2PI
         self.parts.append(part)
-        g_idx = len(self.parts) - 1
-        for k in np.flatnonzero(nis <= g).tolist():
-            self.rows.append((int(ti[k]), int(mj[k]), float(nis[k]), float(cost[k]), float(cost[k] - nis[k] + g)))
-            self.where.append((g_idx, k))
+        k = np.flatnonzero(nis <= g)
+        c, v = cost[k], np.asarray(nis, dtype=np.float64)[k]
+        self.blocks.append((ti[k], mj[k], v, c, c - v + g, np.full(k.size, len(self.parts) - 1), k))
 
     def add_gated(self, sub: Gated) -> None:
         base = len(self.parts)
         self.parts.extend(sub.parts)
         self.skips += sub.numerical_skips
-        for p in range(sub.ti.size):
-            self.rows.append((int(sub.ti[p]), int(sub.mj[p]), float(sub.nis[p]), float(sub.cost[p]),
-                              float(sub.limit[p])))
-            self.where.append((base + int(sub.where[p, 0]), int(sub.where[p, 1])))
+        self.blocks.append((sub.ti, sub.mj, sub.nis, sub.cost, sub.limit, base + sub.where[:, 0], sub.where[:, 1]))
 
     def done(self) -> Gated:
-        order = sorted(range(len(self.rows)), key=lambda k: (self.rows[k][1], self.rows[k][0]))
-        a = np.array([self.rows[k] for k in order], dtype=np.float64).reshape(len(self.rows), 5)
-        w = np.array([self.where[k] for k in order], dtype=np.intp).reshape(len(self.rows), 2)
-        return Gated(a[:, 0].astype(np.intp), a[:, 1].astype(np.intp), a[:, 2], a[:, 3], a[:, 4], self.parts, w,
-                     self.skips)
+        """The kept pairs sorted by (measurement, track)."""
+        if not self.blocks:
+            e, f = np.zeros(0, dtype=np.intp), np.zeros(0)
+            return Gated(e, e, f, f, f, self.parts, np.zeros((0, 2), dtype=np.intp), self.skips)
+        ti, mj, nis, cost, limit, part, row = (np.concatenate(c) for c in zip(*self.blocks, strict=True))
+        o = np.lexsort((ti, mj))
+        return Gated(ti[o].astype(np.intp), mj[o].astype(np.intp), nis[o].astype(np.float64),
+                     cost[o].astype(np.float64), limit[o].astype(np.float64), self.parts,
+                     np.stack([part[o], row[o]], axis=1).astype(np.intp), self.skips)
 
 
 class PerPairGate:
