@@ -72,7 +72,7 @@ class _Batched(ABC):
             return kept.done()
         tracks, row = np.unique(ci, return_inverse=True)  # predict each candidate track once
         pred = self._predict(ts, t_ns, tracks)
-        dims = np.array([meas.models[j].ndim_meas for j in cj.tolist()])
+        dims = meas.dims[cj]
         for dim in np.unique(dims).tolist():
             sel = np.flatnonzero(dims == dim)
             js = cj[sel]
@@ -80,8 +80,8 @@ class _Batched(ABC):
             try:
                 if not model.broadcasts:
                     raise NumericalError("not stackable")
-                ll, part = self._update(pred, row[sel], np.stack([meas.z[j] for j in js.tolist()]),
-                                        np.stack([meas.R[j] for j in js.tolist()]), model)
+                at = meas.at[js]
+                ll, part = self._update(pred, row[sel], meas.Z[dim][at], meas.Rs[dim][at], model)
             except NumericalError:  # a non-PD S somewhere in the group, or a model that takes one state
                 kept.add_gated(self._each.gate(ts, t_ns, ci[sel], js, meas))
                 continue

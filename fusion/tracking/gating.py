@@ -73,11 +73,30 @@ class Taken:
 
 @dataclass(frozen=True)
 class Measured:
-    """The measurements of one scan with their models and noise (R already resolved)."""
+    """The measurements of one scan with their models and noise (R already resolved), and the
+    same stacked once per measurement dimension: measurement j is row at[j] of Z[m], R[m]."""
 
     z: tuple[Array, ...]
     models: tuple[MeasurementModel, ...]
     R: tuple[Array, ...]
+    Z: dict[int, Array]
+    Rs: dict[int, Array]
+    dims: np.ndarray  # (M,) each measurement's dimension
+    at: np.ndarray  # (M,) its row in Z[dims[j]], Rs[dims[j]]
+
+    @classmethod
+    def of(cls, z: tuple[Array, ...], R: tuple[Array, ...], models: tuple[MeasurementModel, ...]) -> Measured:
+        dims = np.array([v.shape[0] for v in z], dtype=np.intp)
+        at = np.zeros(dims.size, dtype=np.intp)
+        Zs: dict[int, Array] = {}
+        Rs: dict[int, Array] = {}
+        for m in np.unique(dims).tolist():
+            rows = np.flatnonzero(dims == m)
+            at[rows] = np.arange(rows.size)
+            rl = rows.tolist()
+            Zs[m] = np.stack([z[j] for j in rl])
+            Rs[m] = np.stack([R[j] for j in rl])
+        return cls(z, models, R, Zs, Rs, dims, at)
 
 
 @dataclass(frozen=True)

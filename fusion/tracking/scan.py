@@ -78,9 +78,9 @@ def run_scan(ts: TrackSet, key: ScanKey, dets: tuple[Detection, ...], ctx: ScanC
     """The scan `key` (see the module docstring); `dets` sorted by seq, R resolved."""
     t_ns, sensor_id = key
     sm = ctx.sensors[sensor_id]
-    meas = Measured(tuple(d.z for d in dets), tuple(sm.by_dim[d.z.shape[0]] for d in dets),
-                    tuple(d.R for d in dets))  # type: ignore[misc]
-    mpos, mvar = _measured_points(sm, dets)
+    meas = Measured.of(tuple(d.z for d in dets), tuple(d.R for d in dets),  # type: ignore[arg-type]
+                       tuple(sm.by_dim[d.z.shape[0]] for d in dets))
+    mpos, mvar = _measured_points(sm, meas)
     tpos, tvar = ts.predicted_position(t_ns, ctx.q2)
     ci, cj = coarse_pairs(tpos, tvar, mpos, mvar, k=ctx.coarse_k)
     gated = ctx.gater.gate(ts, t_ns, ci, cj, meas)
@@ -188,16 +188,14 @@ def _assign_confirmed_first(g: Gated, ts: TrackSet, n_meas: int) -> list[int]:
     return sorted(out, key=lambda p: (mj[p], ti[p]))
 
 
-def _measured_points(sm: SensorModel, dets: tuple[Detection, ...]) -> tuple[Array, Array]:
+def _measured_points(sm: SensorModel, meas: Measured) -> tuple[Array, Array]:
     """World points of the scan's measurements and per-axis variances, one call per dimension."""
-    mpos = np.empty((len(dets), sm.ndim))
-    mvar = np.empty((len(dets), sm.ndim))
-    dims = [d.z.shape[0] for d in dets]
-    for m in sorted(set(dims)):
-        rows = [j for j, k in enumerate(dims) if k == m]
-        Z = np.stack([dets[j].z for j in rows])
-        R = np.stack([dets[j].R for j in rows])  # type: ignore[misc]
-        mpos[rows], mvar[rows] = sm.positions(Z, R)
+    M = meas.dims.size
+    mpos = np.empty((M, sm.ndim))
+    mvar = np.empty((M, sm.ndim))
+    for m, Z in meas.Z.items():
+        rows = np.flatnonzero(meas.dims == m)
+        mpos[rows], mvar[rows] = sm.positions(Z, meas.Rs[m])
     return mpos, mvar
 
 
