@@ -193,19 +193,21 @@ class Tracker:
         accepted: list[Detection] = []
         inputs: list[ControlInput] = []
         refused: list[Refusal] = []
+        admit, received = self.intake.admit, 0
         for d in items:
-            self.intake_counts["received"] += 1
+            received += 1
             if isinstance(d, ControlInput):
                 c, bad = self.intake.admit_input(d)
                 if c is not None:
                     inputs.append(c)
             else:
-                ok, bad = self.intake.admit(d)
+                ok, bad = admit(d)
                 if ok is not None:
                     accepted.append(ok)
             if bad is not None:
                 refused.append(bad)
                 self.refused_counts[bad.reason] = self.refused_counts.get(bad.reason, 0) + 1
+        self.intake_counts["received"] += received
         self.intake_counts["applied"] += len(accepted)
         self.intake_counts["inputs"] += len(inputs)
         return accepted, inputs, refused
