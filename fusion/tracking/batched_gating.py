@@ -1,9 +1,10 @@
 """The batched fine gates, and the choice of gate for a filter.
 
 - Batched: an EKF over a motion model that broadcasts over stacks (`MotionModel.broadcasts`),
-  or an IMM of such EKFs (fusion.core.imm_stack): each candidate track predicted once, every
-  pair of a scan updated in one compiled call per measurement dimension (the filters' own
-  compiled kernels, looped: fusion.core.compiled_stack);
+  an IMM of such EKFs (fusion.core.imm_stack), or a UKF with plain state arithmetic over such a
+  model (fusion.core.ukf_stack): each candidate track predicted once, every pair of a scan
+  updated at once per measurement dimension (the EKF's compiled kernels looped over the stack,
+  fusion.core.compiled_stack; the UKF's equations as numpy operations on stacks);
 - otherwise fusion.tracking.gating.PerPairGate, one filter call per track and per pair.
 They agree to 1e-12 where both apply (tested); the gate's math is in fusion.tracking.gating.
 """
@@ -20,6 +21,9 @@ from fusion.core.imm import IMM, Filter
 from fusion.core.imm_stack import StackPrediction, predict_imm, stackable, update_imm
 from fusion.core.kalman import ExtendedKalmanFilter
 from fusion.core.measurement import MeasurementModel
+from fusion.core.ukf import UnscentedKalmanFilter
+from fusion.core.ukf_stack import predict_ukf, stackable_measurement, update_ukf
+from fusion.core.ukf_stack import stackable as ukf_stackable
 from fusion.errors import NumericalError
 from fusion.tracking.controls import InputTimeline
 from fusion.tracking.gating import Gated, Gater, Kept, Measured, Part, PerPairGate
@@ -34,6 +38,8 @@ def make_gater(filt: Filter, thresholds: dict[int, float], inputs: InputTimeline
         return BatchedGate(filt, thresholds, inputs)
     if isinstance(filt, IMM) and stackable(filt) and inputs is None:
         return BatchedIMMGate(filt, thresholds)
+    if isinstance(filt, UnscentedKalmanFilter) and ukf_stackable(filt) and inputs is None:
+        return BatchedUKFGate(filt, thresholds)
     return PerPairGate(filt, thresholds, inputs)
 
 
@@ -135,3 +141,22 @@ class BatchedIMMGate(_Batched):
         sub = StackPrediction(p.xs[rows], p.Ps[rows], p.c[rows], p.x[rows], p.P[rows])
         u = update_imm(sub, Z, R, model)
         return u.loglik, Part(u.x, u.P, sub.x, sub.P, u.y, u.S, u.H, u.nis, u.xs, u.Ps, u.mu)
+
+
+class BatchedUKFGate(_Batched):
+    """Every candidate pair at once for a UKF (fusion.core.ukf_stack); a measurement model whose
+    mean or h does not stack goes pair by pair."""
+
+    filter: UnscentedKalmanFilter
+
+    def _predict(self, ts: TrackSet, t_ns: int, tracks: np.ndarray) -> tuple[Array, Array]:
+        return predict_ukf(self.filter, ts.X[tracks], ts.P[tracks], (t_ns - ts.t_ns[tracks]) * 1e-9)
+
+    def _update(self, pred: object, rows: np.ndarray, Z: Array, R: Array, model: MeasurementModel
+                ) -> tuple[Array, Part]:
+        if not stackable_measurement(model):
+            raise NumericalError("a measurement model whose mean does not stack")
+        Xp, Pp = pred[0][rows], pred[1][rows]  # type: ignore[index]
+        Xn, Pn, Y, S, nis, ll = update_ukf(self.filter, Xp, Pp, Z, R, model)
+        H = np.broadcast_to(model.jacobian(Xp), (rows.size, Z.shape[1], Xp.shape[1]))
+        return ll, Part(Xn, Pn, Xp, Pp, Y, S, H, nis)

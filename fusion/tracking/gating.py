@@ -9,8 +9,8 @@ passes the gate. For an IMM, S and NIS are those of the mixture and ln det S is 
 
 This module holds what every gate shares (the stacked answers Part, the gathered Taken, the
 kept pairs Gated and their collector Kept, the Gater interface) and the gate for any filter:
-- PerPair: one filter predict per track and one update per pair (any filter: UKF, IMM, a
-  model that takes one state at a time).
+- PerPair: one filter predict per track and one update per pair (any filter: a UKF with
+  custom state arithmetic, filters over models that take one state at a time, control inputs).
 The batched gates and the choice between them live in fusion.tracking.batched_gating; the two
 agree to 1e-12 where both apply (tested).
 """
