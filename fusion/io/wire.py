@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable
 from dataclasses import asdict
 from typing import Any
@@ -16,7 +17,6 @@ STREAM_SUFFIX = ".fstream"
 
 status_key = m.status_key
 snapshot_key = m.snapshot_key
-track_key = m.track_key
 all_measurements_key = m.all_meas_key
 all_truth_key = m.all_truth_key
 all_input_key = m.all_input_key
@@ -114,13 +114,28 @@ def truth_in_layout(msg: m.Truth, layout: tuple[str, ...]) -> tuple[str, int, np
     return msg.target_id, msg.t_ns, np.array([by_name[n] for n in layout], dtype=np.float64)
 
 
+@functools.lru_cache(maxsize=64)
+def _tracks_prefix(ns: str) -> str:
+    return m.track_key(ns, 0)[:-1]  # the namespace checked once
+
+
+def track_key(ns: str, track_id: int) -> str:
+    """fusion.messages.track_key, the namespace's prefix built once."""
+    return _tracks_prefix(ns) + str(int(track_id))
+
+
 def estimate_message(e: Estimate, *, layout: tuple[str, ...], model: str) -> m.Estimate:
+    return _estimate(e, list(layout), model)
+
+
+def _estimate(e: Estimate, names: list[str], model: str) -> m.Estimate:
+    """The wire Estimate; `names` (the layout) is shared by the messages of one encoder."""
+    mu = e.mode_probabilities
     return m.Estimate(
         track_id=e.track_id, t_ns=e.t_ns, sensor_id=e.sensor_id, seq=max(e.seq, 0), state=e.x.tolist(),
-        cov=e.P.ravel().tolist(), layout=list(layout) if e.x.size else [], model=model,
+        cov=e.P.ravel().tolist(), layout=names if e.x.size else [], model=model,
         status=e.status,  # type: ignore[arg-type]
-        revision=e.revision, nis=e.nis,
-        mode_probabilities=None if e.mode_probabilities is None else e.mode_probabilities.tolist(),
+        revision=e.revision, nis=e.nis, mode_probabilities=None if mu is None else mu.tolist(),
     )
 
 
@@ -130,8 +145,10 @@ def event_message(ev: TrackEvent) -> m.Event:
 
 
 def estimate_encoder(layout: tuple[str, ...], model: str) -> Callable[[Estimate], bytes]:
+    names = list(layout)
+
     def enc(e: Estimate) -> bytes:
-        return m.encode(estimate_message(e, layout=layout, model=model))
+        return m.encode(_estimate(e, names, model))
 
     return enc
 
