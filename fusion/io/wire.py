@@ -132,7 +132,7 @@ def _estimate(e: Estimate, names: list[str], model: str) -> m.Estimate:
     """The wire Estimate; `names` (the layout) is shared by the messages of one encoder."""
     mu = e.mode_probabilities
     return m.Estimate(
-        track_id=e.track_id, t_ns=e.t_ns, sensor_id=e.sensor_id, seq=max(e.seq, 0), state=e.x.tolist(),
+        track_id=e.track_id, t_ns=e.t_ns, sensor_id=e.sensor_id, seq=e.seq if e.seq > 0 else 0, state=e.x.tolist(),
         cov=e.P.ravel().tolist(), layout=names if e.x.size else [], model=model,
         status=e.status,  # type: ignore[arg-type]
         revision=e.revision, nis=e.nis, mode_probabilities=None if mu is None else mu.tolist(),

@@ -84,7 +84,8 @@ class Intake:
             if ref is None or t_ns <= ref + self.future_ns:
                 clocks.observe(source, t_ns, arrival_ns)
         if ref is not None:
-            self.now_ns = ref if self.now_ns is None else max(self.now_ns, ref)
+            if self.now_ns is None or ref > self.now_ns:
+                self.now_ns = ref
             if t_ns > ref + self.future_ns:
                 return Refusal(source, t_ns, seq, Reason.FUTURE,
                                f"{(t_ns - ref) / 1e9:.3f} s ahead of {source}'s clock")
