@@ -60,7 +60,18 @@ class RadarSensorConfig(_SensorBase, tag="radar"):
     range_rate_std_mps: PosFloat | None = None
 
 
-SensorConfig = CartesianSensorConfig | RadarSensorConfig
+class CustomSensorConfig(_SensorBase, tag="custom", kw_only=True):
+    """A user's measurement model by import path, "package.module:Name" built as Name(**params)
+    and checked at load (shapes, a finite-difference Jacobian check; fusion.models.loader). Its
+    h is in the world frame, so the pose goes into its params (position_m, heading_rad, pitch_rad
+    and roll_rad are refused); its R is the noise used when a message carries none. Its z comes
+    as a `cartesian` message's pos_m (1-3 components, noise std_m or cov_m2 in z's units)."""
+
+    model: str
+    params: dict[str, float | int | list[float]] = {}
+
+
+SensorConfig = CartesianSensorConfig | RadarSensorConfig | CustomSensorConfig
 
 
 class ModeConfig(Section):
@@ -73,21 +84,27 @@ class ModeConfig(Section):
     sojourn_s: PosFloat = 10.0
 
 
+ACCEL_PSD_DEFAULT = 1.0
+
+
 class MotionConfig(Section):
     """The motion model of every track.
 
     model: "cv" constant velocity, "ca" constant acceleration, "ct" coordinated turn (2-D),
     "imm" an interacting multiple model over `modes`, "custom" a user's model given by import
     path (`custom`, `params`): checked at load (shapes, a finite-difference Jacobian check).
-    accel_psd_m2s3: power spectral density of the white acceleration noise (m^2/s^3), q^2 in
-    Q_axis = q^2 [[dt^3/3, dt^2/2], [dt^2/2, dt]]; for "ca" it is the jerk density (m^2/s^5).
+    accel_psd_m2s3: power spectral density of the white acceleration noise of "cv" and "ct"
+    (m^2/s^3), q^2 in Q_axis = q^2 [[dt^3/3, dt^2/2], [dt^2/2, dt]].
+    jerk_psd_m2s5: "ca" only, and needed there: the density of its white jerk noise (m^2/s^5),
+    q^2 in Q_axis = q^2 [[dt^5/20, dt^4/8, dt^3/6], [dt^4/8, dt^3/3, dt^2/2], [dt^3/6, dt^2/2, dt]].
     turn_psd_rad2s3: density of the white turn-rate noise of "ct" (rad^2/s^3).
     filter: "ekf" (exact KF on linear models) or "ukf".
     """
 
     model: Literal["cv", "ca", "ct", "imm", "custom"] = "cv"
     ndim: Literal[1, 2, 3] = 2
-    accel_psd_m2s3: NonNegFloat = 1.0
+    accel_psd_m2s3: NonNegFloat = ACCEL_PSD_DEFAULT
+    jerk_psd_m2s5: NonNegFloat | None = None
     turn_psd_rad2s3: NonNegFloat = 1e-4
     modes: list[ModeConfig] = []
     filter: Literal["ekf", "ukf"] = "ekf"
@@ -184,6 +201,11 @@ class TrackerConfig(Section):
         m, d = self.motion, self.motion.ndim
         if (m.model == "ct" or any(x.model == "ct" for x in m.modes)) and d != 2:
             raise ValueError("the coordinated-turn model is 2-D: set motion.ndim = 2")
+        if m.model == "ca" and (m.jerk_psd_m2s5 is None or m.accel_psd_m2s3 != ACCEL_PSD_DEFAULT):
+            raise ValueError("motion.model = 'ca' takes its noise as motion.jerk_psd_m2s5 (m^2/s^5, the white "
+                             "jerk's density), not accel_psd_m2s3 (the acceleration noise of 'cv' and 'ct')")
+        if m.model != "ca" and m.jerk_psd_m2s5 is not None:
+            raise ValueError(f"motion.jerk_psd_m2s5 is the noise of model 'ca'; model {m.model!r} takes accel_psd_m2s3")
         if m.model == "imm" and len(m.modes) < 2:
             raise ValueError("motion.model = 'imm' needs at least two [[motion.modes]]")
         if m.model != "imm" and m.modes:
@@ -197,6 +219,9 @@ class TrackerConfig(Section):
         if self.control is not None and self.control.source_id in ids:
             raise ValueError(f"control.source_id {self.control.source_id!r} is also a sensor id")
         for s in self.sensors:
+            if isinstance(s, CustomSensorConfig) and (s.position_m or s.heading_rad or s.pitch_rad or s.roll_rad):
+                raise ValueError(f"sensor {s.id}: a custom sensor's pose cannot be applied to its model: give it in "
+                                 "params (its h is in the world frame)")
             if isinstance(s, RadarSensorConfig) and d == 1:
                 raise ValueError(f"sensor {s.id}: a radar needs a 2-D or 3-D state (motion.ndim)")
             if s.position_m and len(s.position_m) != d:
@@ -264,7 +289,9 @@ class ZenohConfig(Section):
     only, with multicast and gossip scouting off: nothing else is needed on the machine.
     mode "client" connects to `connect` endpoints (a router or another peer). A listen endpoint
     off loopback is refused unless allow_remote is true. tls and access_control: see their
-    sections and SECURITY.md."""
+    sections and SECURITY.md. A client service whose peer is not there yet retries for
+    connect_wait_s (backoff from 0.1 s, doubling, at most retry_max_s between tries; 0: once),
+    and reconnects by itself (same backoff) when the peer goes away and comes back."""
 
     mode: Literal["peer", "client"] = "peer"
     listen: list[str] = msgspec.field(default_factory=lambda: ["tcp/127.0.0.1:7447"])
@@ -272,6 +299,8 @@ class ZenohConfig(Section):
     allow_remote: bool = False
     tls: TlsConfig | None = None
     access_control: AccessControlConfig | None = None
+    connect_wait_s: Annotated[float, msgspec.Meta(ge=0.0, le=86400.0)] = 30.0
+    retry_max_s: Annotated[float, msgspec.Meta(gt=0.0, le=60.0)] = 2.0
 
 
 class RecordingConfig(Section):
@@ -297,6 +326,16 @@ class IntakeConfig(Section):
     max_future_wall_s: PosFloat = 3600.0  # refuse sensor times this far ahead of the wall clock
 
 
+class PublicationConfig(Section):
+    """[publication]: period_s > 0 also publishes, every period_s of stream (sensor) time, every
+    confirmed track predicted to that tick on fusion/<ns>/predicted (fusion.prediction); 0: off.
+    smooth_lag = L > 0 also publishes each confirmed estimate smoothed over the L estimates of
+    its track after it, x_k|k+L, on fusion/<ns>/smoothed/<track_id> (fusion.fixed_lag); 0: off."""
+
+    period_s: NonNegFloat = 0.0
+    smooth_lag: Annotated[int, msgspec.Meta(ge=0, le=1000)] = 0
+
+
 class ServiceConfig(Section):
     """`fusion serve --config FILE`: everything the service needs."""
 
@@ -305,6 +344,7 @@ class ServiceConfig(Section):
     zenoh: ZenohConfig = ZenohConfig()
     recording: RecordingConfig = RecordingConfig()
     intake: IntakeConfig = IntakeConfig()
+    publication: PublicationConfig = PublicationConfig()
     publish_tentative: bool = False
     warnings_per_minute: Annotated[int, msgspec.Meta(ge=1)] = 60
 

@@ -43,6 +43,7 @@ Elevation = Annotated[float, msgspec.Meta(ge=-math.pi / 2, le=math.pi / 2)]
 Prob = Annotated[float, msgspec.Meta(ge=0.0, le=1.0)]
 TimeNs = Annotated[int, msgspec.Meta(ge=-(2**62), le=2**62)]
 Seq = Annotated[int, msgspec.Meta(ge=0, le=2**62)]
+Epoch = Annotated[int, msgspec.Meta(ge=0, le=2**63 - 1)]
 Id = Annotated[str, msgspec.Meta(pattern=r"^[A-Za-z0-9_.\-]{1,64}$")]
 Version = Annotated[int, msgspec.Meta(ge=1, le=SCHEMA_VERSION)]
 
@@ -108,13 +109,18 @@ class Radar(Base, tag="radar", kw_only=True):
 
 
 class Measurement(Base, tag="measurement", kw_only=True):
-    """One measurement of one sensor at sensor time t_ns (integer nanoseconds)."""
+    """One measurement of one sensor at sensor time t_ns (integer nanoseconds).
+
+    epoch: the publisher's boot id, fixed from its process start (fusion-publish uses the wall
+    clock in ns at start); seq counts from 0 again in a new epoch. 0 (the default, left off the
+    wire) means the publisher gives none: messages of schema 1 without it still decode."""
 
     v: Version = msgspec.field(default_factory=_schema_version)
     sensor_id: Id
     t_ns: TimeNs
     seq: Seq
     data: Cartesian | Radar
+    epoch: Epoch = 0
 
 
 class Input(Base, tag="input", kw_only=True):
@@ -201,6 +207,29 @@ class Counts(Base, kw_only=True):
     truth: int
 
 
+class SeqGapStats(Base, kw_only=True):
+    """A sensor's seq gaps (fusion.io.gaps): missing now, filled later, publisher runs seen, and
+    samples zenoh's miss detection reported lost before recovery (zenoh_missed)."""
+
+    missing: int
+    filled: int
+    epochs: int
+    restarts: int
+    zenoh_missed: int = 0
+
+
+class ZenohLink(Base, kw_only=True):
+    """How the service is joined to zenoh: state "listening" (a peer), "connected" or
+    "disconnected" (a client); connect_attempts it took at start; reconnects since."""
+
+    mode: str
+    state: str
+    routers: int
+    peers: int
+    connect_attempts: int
+    reconnects: int
+
+
 class ServiceStatus(Base, tag="status", kw_only=True):
     v: Version = msgspec.field(default_factory=_schema_version)
     uptime_s: float
@@ -210,6 +239,8 @@ class ServiceStatus(Base, tag="status", kw_only=True):
     recording: str | None
     recording_bytes: int
     queue_depth: int
+    gaps: dict[str, SeqGapStats] = {}  # by sensor
+    zenoh: ZenohLink | None = None
 
 
 class Snapshot(Base, tag="snapshot", kw_only=True):
@@ -232,6 +263,16 @@ _dec_any = msgspec.msgpack.Decoder(Message)
 _json_any = msgspec.json.Decoder(Message)
 
 
+class _Versioned(msgspec.Struct):
+    """Any message's schema version, the rest of it ignored (a sender without `v` speaks 1)."""
+
+    v: int = 1
+
+
+_version_of = {msgspec.msgpack.Decoder: msgspec.msgpack.Decoder(_Versioned),
+               msgspec.json.Decoder: msgspec.json.Decoder(_Versioned)}
+
+
 def encode(msg: Message) -> bytes:
     """msgpack bytes of a message."""
     return _enc.encode(msg)
@@ -246,13 +287,23 @@ def _decode(dec: msgspec.msgpack.Decoder | msgspec.json.Decoder, data: bytes | s
     try:
         return dec.decode(data)
     except msgspec.ValidationError as e:
-        if str(e).endswith("at `$.v`"):
+        v = _version(dec, data)
+        if v is not None and v != SCHEMA_VERSION:
             raise UnsupportedVersionError(f"{what} of an unsupported schema version ({e}); this service reads "
                                           f"version {SCHEMA_VERSION}: upgrade it or the sender") from None
         raise InvalidMessageError(f"invalid {what}: {e}") from None
     except (msgspec.DecodeError, UnicodeDecodeError, ValueError, OverflowError) as e:
         # msgspec raises UnicodeDecodeError for invalid UTF-8 in a string, not DecodeError
         raise MalformedMessageError(f"malformed {what}: {type(e).__name__}: {e}") from None
+
+
+def _version(dec: msgspec.msgpack.Decoder | msgspec.json.Decoder, data: bytes | str) -> int | None:
+    """The schema version a message that failed validation says it has (None: no integer `v`
+    in an object; such a message is invalid, whatever its version)."""
+    try:
+        return _version_of[type(dec)].decode(data).v
+    except msgspec.DecodeError:  # ValidationError included: a `v` that is not an integer
+        return None
 
 
 def decode_measurement(data: bytes) -> Measurement:

@@ -24,6 +24,7 @@ from typing import Protocol
 import numpy as np
 
 from fusion.errors import InvalidMessageError, MalformedMessageError, UnsupportedVersionError
+from fusion.io.gaps import SeqGaps
 from fusion.io.latency import LatencyTracker
 from fusion.io.ratelimit import RateLimitedLog
 from fusion.publication import PublishedView
@@ -84,6 +85,7 @@ class Pipeline:
         self.max_future_wall_ns = max_future_wall_ns
         self.view = PublishedView(publish_tentative=publish_tentative)
         self.latency = LatencyTracker()
+        self.gaps = SeqGaps()  # seq gaps per configured sensor and publisher epoch
         self.warn = RateLimitedLog(log, per_minute=warnings_per_minute)
         self._received = 0
         self._truth = 0
@@ -150,6 +152,7 @@ class Pipeline:
             return None
         if d.sensor_id in self.tracker.sensors:
             self.latency.add(d.sensor_id, arrival_ns - d.t_ns)
+            self.gaps.add(d.sensor_id, d.epoch, d.seq)
         return d
 
     def ingest(self, records: Sequence[Record]) -> Output:

@@ -3,13 +3,19 @@
 Deterministic: the tracker's output depends only on the samples and their arrival order, so a
 replay gives the estimates the live service published (latest revision per track, time and
 sensor), and two replays give identical estimates.
+
+With `smooth`, every track that was ever confirmed is also smoothed over its whole life by the
+fixed-interval RTS smoother (fusion.smoothing), and the smoothed estimates are written into the
+same recording beside the filtered ones (fusion.io.smoothed); the position RMSE against the
+truth, filtered and smoothed over the same rows, is returned. The smoother needs every track's
+whole history: memory grows with the stream (it is a review tool, not for endless streams).
 """
 
 from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 from fusion import messages as m
@@ -17,8 +23,12 @@ from fusion.config import ServiceConfig, load_service_config
 from fusion.errors import ConfigError
 from fusion.io import wire
 from fusion.io.rerun_sink import RerunSink
+from fusion.io.smoothed import log_smoothed
 from fusion.io.streamfile import read_records
 from fusion.pipeline import Pipeline
+from fusion.smoothing import Histories, position_rmse
+from fusion.smoothing import smooth as smooth_tracks
+from fusion.tracking.results import Counts
 from fusion.tracking.tracker import Tracker
 
 CONFIGS = Path(__file__).resolve().parent.parent / "configs"
@@ -28,7 +38,11 @@ CONFIGS = Path(__file__).resolve().parent.parent / "configs"
 class ReplayCounts:
     records: int
     estimates: int
-    counts: dict[str, int] = field(default_factory=dict)  # the pipeline's counts (applied, duplicates, ...)
+    counts: Counts  # the pipeline's counts (applied, refused by reason, ...)
+    smoothed_tracks: int = 0  # with smooth=True
+    smoothing_failed: tuple[tuple[int, str], ...] = ()  # (track id, why)
+    rmse_filtered_m: float | None = None  # position RMSE vs truth, over the smoothed tracks' matched rows
+    rmse_smoothed_m: float | None = None
 
 
 def _config_for(path: Path | None, namespace: str) -> ServiceConfig:
@@ -45,8 +59,10 @@ def _config_for(path: Path | None, namespace: str) -> ServiceConfig:
 
 def replay(stream: str | Path, *, config: str | Path | None = None, out: str | Path | None = None,
            estimates: str | Path | None = None, realtime: bool = False,
-           progress: Callable[[int, int], None] | None = None, batch: int = 1000) -> ReplayCounts:
-    """Replay `stream` (.fstream or .jsonl); write a recording to `out` and estimates to a .jsonl.
+           progress: Callable[[int, int], None] | None = None, batch: int = 1000,
+           smooth: bool = False) -> ReplayCounts:
+    """Replay `stream` (.fstream or .jsonl); write a recording to `out` and estimates to a .jsonl;
+    with `smooth`, smoothed tracks too (see the module docstring).
     `progress(done, total)` is called after every batch of records (for a progress bar). Files
     are closed complete even when interrupted (KeyboardInterrupt propagates)."""
     records, meta = read_records(stream)
@@ -58,13 +74,15 @@ def replay(stream: str | Path, *, config: str | Path | None = None, out: str | P
         sink = RerunSink(out, recording_id=Path(out).stem, layout=tracker.layout,
                          position_indices=tracker.position_indices, velocity_indices=tracker.velocity_indices,
                          meta={"namespace": ns, "replay_of": str(stream)}, counts=lambda: pipe.counts().flat())
-    pipe = Pipeline(tracker, wire.Codec(ns), sink=sink,
+    hist = Histories(sink) if smooth else None
+    pipe = Pipeline(tracker, wire.Codec(ns), sink=hist if hist is not None else sink,
                     max_future_wall_ns=round(cfg.intake.max_future_wall_s * 1e9),
                     publish_tentative=cfg.publish_tentative)
     est_file = Path(estimates).open("wb") if estimates else None  # noqa: SIM115 - closed in finally
     enc = wire.estimate_encoder(tracker.layout, tracker.model_name)
     all_records = list(records)
     n_est = 0
+    sm = None
     t_wall0, a0 = time.monotonic(), all_records[0][0] if all_records else 0
     try:
         i = 0
@@ -86,9 +104,18 @@ def replay(stream: str | Path, *, config: str | Path | None = None, out: str | P
                     est_file.write(m.encode_json(m.decode_estimate(enc(e))) + b"\n")
             if progress is not None:
                 progress(i, len(all_records))
+        if hist is not None:
+            sm = smooth_tracks(hist, tracker)
+            if sink is not None:
+                log_smoothed(sink.rec, sm.tracks, tracker.layout)
+                for tid, why in sm.failed:
+                    sink.log_text(tracker.now_ns or 0, f"track {tid} not smoothed: {why}", "WARN")
     finally:
         if est_file is not None:
             est_file.close()
         if sink is not None:
             sink.close()
-    return ReplayCounts(len(all_records), n_est, pipe.counts().flat())
+    if sm is None:
+        return ReplayCounts(len(all_records), n_est, pipe.counts())
+    rf, rs = position_rmse(sm.tracks, tracker.position_indices)
+    return ReplayCounts(len(all_records), n_est, pipe.counts(), len(sm.tracks), sm.failed, rf, rs)

@@ -7,13 +7,19 @@ wake the loop; the thread that calls `run` owns the tracker and does everything 
 
 Queryables (answers prepared by the loop, so callbacks never touch the tracker):
   fusion/<ns>/status     ServiceStatus (msgpack)
-  fusion/<ns>/snapshot   the latest estimate of every confirmed track (msgpack list)
+  fusion/<ns>/snapshot   the latest estimate of every confirmed track (msgpack list);
+                         with ?t_ns=T every confirmed track predicted to T (answered by the loop)
+Publications: fusion/<ns>/tracks/<id> (estimates), fusion/<ns>/events/<id> (confirmed,
+coasting, deleted with the reason, withdrawals; fusion.publication) and, with [publication]
+period_s, fusion/<ns>/predicted (fusion.prediction); with smooth_lag, fusion/<ns>/smoothed/<id>
+(fusion.fixed_lag).
 Shutdown (SIGINT, SIGTERM or stop()): stop intake, drain the queue, flush and close the
 recording and the stream file, close the Zenoh session.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import threading
 import time
@@ -22,12 +28,16 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from fusion import messages as m
 from fusion.config import ServiceConfig
+from fusion.fixed_lag import FixedLagSmoother, smoothed_key
 from fusion.io import wire
 from fusion.io.recording import RotatingSink
 from fusion.io.rerun_sink import RerunSink
-from fusion.io.zenoh_bus import zenoh_session_config
+from fusion.io.zenoh_advanced import RecoveringSubscription
+from fusion.io.zenoh_bus import connection_of, open_with_retry
 from fusion.pipeline import Pipeline, Record
+from fusion.prediction import Cadence, encode_predicted, predicted_key, snapshot_time
 from fusion.tracking.detection import Reason
 from fusion.tracking.results import Estimate
 from fusion.tracking.tracker import Tracker
@@ -69,9 +79,20 @@ class Service:
         self._snapshot_payload = b""
         self._status_at = 0.0
         self.published = 0
+        self.events_published = 0
+        self.predicted_published = 0  # periodic predicted snapshots
+        period_ns = round(config.publication.period_s * 1e9)
+        self.cadence = Cadence(period_ns) if period_ns > 0 else None
+        self._queries: deque[tuple[Any, int]] = deque()  # snapshot?t_ns queries for the loop
+        lag = config.publication.smooth_lag
+        self.lag_smoother = FixedLagSmoother(self.tracker, lag) if lag > 0 else None
+        self.smoothed_published = 0
         self.session: Any = None
         self._decls: list[Any] = []
         self.on_publish: Callable[[Estimate], None] | None = None
+        self._connect_attempts = 0
+        self._linked = True  # a client: connected to its peer or router when last looked
+        self._reconnects = 0
 
     # ---- Zenoh side ----------------------------------------------------------------------------
     def _on_sample(self, sample: Any) -> None:
@@ -87,7 +108,25 @@ class Service:
         query.reply(wire.status_key(self.ns), self._status_payload)
 
     def _on_snapshot(self, query: Any) -> None:
-        query.reply(wire.snapshot_key(self.ns), self._snapshot_payload)
+        try:
+            t_ns = snapshot_time(query.parameters)
+        except ValueError as e:
+            query.reply_err(str(e))
+            return
+        if t_ns is None:
+            query.reply(wire.snapshot_key(self.ns), self._snapshot_payload)
+            return
+        self._queries.append((query, t_ns))  # the loop owns the tracker: it answers
+        self._wake.set()
+
+    def _answer_queries(self) -> None:
+        """Answer the snapshot?t_ns queries waiting (tracker thread)."""
+        while self._queries:
+            query, t_ns = self._queries.popleft()
+            try:
+                query.reply(wire.snapshot_key(self.ns), encode_predicted(self.tracker, t_ns))
+            finally:
+                query.drop()
 
     def _open_outputs(self) -> None:
         """Create the recording and the stream file (only once the session is open, so that a
@@ -117,8 +156,9 @@ class Service:
         """Open the Zenoh session, then the output files, then declare the subscribers and
         queryables."""
         zc = self.config.zenoh
-        conf = zenoh_session_config(zc, namespace=self.ns)
-        self.session = self._zenoh.open(conf)
+        self.session, self._connect_attempts = open_with_retry(zc, namespace=self.ns, stop=self._stop)
+        if self.session is None:  # stopped while connecting: nothing was opened
+            return
         try:
             self._open_outputs()
         except BaseException:
@@ -130,8 +170,8 @@ class Service:
         self._refresh_status(force=True)
         s = self.session
         self._decls = [
-            s.declare_subscriber(wire.all_measurements_key(self.ns), self._on_sample),
-            s.declare_subscriber(wire.all_input_key(self.ns), self._on_sample),
+            RecoveringSubscription(s, wire.all_measurements_key(self.ns), self._on_sample),
+            RecoveringSubscription(s, wire.all_input_key(self.ns), self._on_sample),
             s.declare_subscriber(wire.all_truth_key(self.ns), self._on_sample),
             s.declare_queryable(wire.status_key(self.ns), self._on_status),
             s.declare_queryable(wire.snapshot_key(self.ns), self._on_snapshot),
@@ -164,11 +204,27 @@ class Service:
             self.published += 1
             if self.on_publish is not None:
                 self.on_publish(e)
+        for ev in out.events_to_publish:
+            self.session.put(m.event_key(self.ns, ev.track_id), m.encode(wire.event_message(ev)),
+                             congestion_control=BLOCK)
+            self.events_published += 1
+        if self.lag_smoother is not None:
+            for e in self.lag_smoother.update(out.result.estimates):
+                self.session.put(smoothed_key(self.ns, e.track_id), enc(e), congestion_control=BLOCK)
+                self.smoothed_published += 1
+        if self.cadence is not None:
+            first = min((p.t_ns for p in out.result.measurements), default=None)
+            for t_ns in self.cadence.due(self.tracker.now_ns, first):
+                self.session.put(predicted_key(self.ns), encode_predicted(self.tracker, t_ns),
+                                 congestion_control=BLOCK)
+                self.predicted_published += 1
 
     def run(self, *, duration_s: float | None = None) -> int:
         """Process until stop() (or a signal handler calling it) or `duration_s`; then shut down."""
         if self.session is None:
             self.open()
+            if self.session is None:
+                return 0
         deadline = None if duration_s is None else time.monotonic() + duration_s
         batch_max = self.config.intake.batch_max
         try:
@@ -184,6 +240,7 @@ class Service:
                 else:
                     self._wake.wait(0.05)
                     self._wake.clear()
+                self._answer_queries()
                 if self.sink is not None:
                     self.sink.maybe_flush()
                 self._refresh_status()
@@ -200,6 +257,7 @@ class Service:
         while self._q:
             self._step(self._drain(self.config.intake.batch_max))
         self._refresh_status(force=True)
+        self._answer_queries()
         for d in self._decls[3:]:
             d.undeclare()
         self._decls = []
@@ -241,7 +299,38 @@ class Service:
             "recording": None if self.sink is None else str(self.sink.path),
             "recording_bytes": 0 if self.sink is None else self._recording_bytes(),
             "queue_depth": len(self._q),
+            "gaps": self._gaps(),
+            "zenoh": self._link(),
         }
+
+    def _link(self) -> dict[str, Any]:
+        """How the session is joined: a peer is "listening"; a client "connected" or
+        "disconnected" (zenoh reconnects by itself; each return is counted)."""
+        routers, peers = connection_of(self.session) if self.session is not None else (0, 0)
+        mode = self.config.zenoh.mode
+        if mode == "client":
+            linked = routers + peers > 0
+            if linked and not self._linked:
+                self._reconnects += 1
+                log.warning("zenoh: connected again to %s", ", ".join(self.config.zenoh.connect))
+            elif self._linked and not linked and self.session is not None:
+                log.warning("zenoh: lost the connection to %s; reconnecting", ", ".join(self.config.zenoh.connect))
+            self._linked = linked
+            state = "connected" if linked else "disconnected"
+        else:
+            state = "listening"
+        return {"mode": mode, "state": state, "routers": routers, "peers": peers,
+                "connect_attempts": self._connect_attempts, "reconnects": self._reconnects}
+
+    def _gaps(self) -> dict[str, dict[str, int]]:
+        """Per sensor: seq values missing (and filled later), publisher runs (fusion.io.gaps),
+        and samples zenoh reported missed for good (fusion.io.zenoh_advanced)."""
+        out = {s: dataclasses.asdict(g) for s, g in self.pipeline.gaps.report().items()}
+        for d in self._decls[:2]:
+            for sensor, n in d.missed().items():
+                row = out.setdefault(sensor, {"missing": 0, "filled": 0, "epochs": 0, "restarts": 0})
+                row["zenoh_missed"] = row.get("zenoh_missed", 0) + n
+        return dict(sorted(out.items()))
 
     def _recording_bytes(self) -> int:
         if isinstance(self.sink, RotatingSink):

@@ -72,14 +72,14 @@ def publish_scenario(args: argparse.Namespace) -> int:
     import zenoh
 
     from fusion.io.zenoh_bus import zenoh_session_config
-    from publishers.publish import publish
+    from publishers.publish import boot_epoch, publish
     from publishers.stream import build_stream
 
     # Zenoh first: nothing to connect to is found out before the stream is built
     with zenoh.open(zenoh_session_config(zc, namespace=ns)) as session:
         status(args, f"fusion-publish: building the stream of {path.stem} ...")
         t0 = 0 if args.relative_time else time.time_ns() // 1_000_000 * 1_000_000
-        samples, _ = build_stream(spec, namespace=ns, t0_ns=t0)
+        samples, _ = build_stream(spec, namespace=ns, t0_ns=t0, epoch=boot_epoch())
         stop = threading.Event()
         signal.signal(signal.SIGINT, lambda *_: stop.set())
         signal.signal(signal.SIGTERM, lambda *_: stop.set())

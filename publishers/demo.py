@@ -25,7 +25,7 @@ from fusion.errors import FusionError
 from fusion.io.inspect import Summary, summarise
 from fusion.io.zenoh_bus import free_tcp_port, session_config
 from fusion.service import Service
-from publishers.publish import publish
+from publishers.publish import boot_epoch, publish
 from publishers.spec import load_scenario_file, scenario_path
 from publishers.stream import build_stream
 
@@ -69,7 +69,9 @@ def _open_service(cfg: Any, out: Path, stream: Path) -> tuple[Service, str]:
 
 
 class _Monitor:
-    """Asks the service for its status (its queryable) a few times a second and reports progress."""
+    """Asks the service for its status (its queryable) a few times a second and reports progress:
+    samples handled (measurements, inputs and truth: the service's `received` less its queue)
+    of all the samples the demo publishes."""
 
     def __init__(self, session: Any, namespace: str, total: int, progress: Progress) -> None:
         from fusion.io.query import query_status
@@ -117,7 +119,7 @@ def run_demo(*, scenario: str = "mix", duration_s: float | None = None, out: str
         spec = msgspec.structs.replace(spec, duration_s=duration_s)
     out = Path(out) if out is not None else default_out(scenario)
     stream = out.with_suffix(".fstream")
-    samples, truths = build_stream(spec, namespace=sf.service.namespace)
+    samples, truths = build_stream(spec, namespace=sf.service.namespace, epoch=boot_epoch())
     if duration_s is None:
         duration_s = max(int(t.t_ns[-1]) for t in truths if t.t_ns.size) / 1e9
     planned = Counter(s.key.split("/")[2] for s in samples)
@@ -139,7 +141,7 @@ def run_demo(*, scenario: str = "mix", duration_s: float | None = None, out: str
     counts: Counter[str] = Counter()
     try:
         with zenoh.open(session_config(mode="client", connect=[endpoint])) as session:
-            monitor = _Monitor(session, svc.ns, planned["meas"], progress) if progress is not None else None
+            monitor = _Monitor(session, svc.ns, sum(planned.values()), progress) if progress is not None else None
             try:
                 counts = publish(session, samples, speed=speed, match_timeout_s=10.0, stop=stop)
                 _wait_idle(svc, runner, stop, timeout_s=600.0)

@@ -70,8 +70,10 @@ def truths_of(spec: ScenarioSpec) -> tuple[list[TargetTruth], Reference | None]:
     return [truth], ref
 
 
-def build_stream(spec: ScenarioSpec, *, namespace: str, t0_ns: int = 0) -> tuple[list[Sample], list[TargetTruth]]:
-    """Every sample of the scenario, sorted by arrival; sensor and truth times offset by t0_ns."""
+def build_stream(spec: ScenarioSpec, *, namespace: str, t0_ns: int = 0,
+                 epoch: int = 0) -> tuple[list[Sample], list[TargetTruth]]:
+    """Every sample of the scenario, sorted by arrival; sensor and truth times offset by t0_ns;
+    every measurement carries the publisher's `epoch` (its boot id, 0 for none)."""
     rng = np.random.default_rng(spec.seed + 1_000_003)
     truths, ref = truths_of(spec)
     if spec.duration_s is not None:
@@ -88,8 +90,8 @@ def build_stream(spec: ScenarioSpec, *, namespace: str, t0_ns: int = 0) -> tuple
             emitted.extend(simulate_sensor(s, truths, np.random.default_rng([spec.seed, _stable(s.id)])))
     samples = []
     for e in emitted:
-        msg = e.msg if t0_ns == 0 else m.Measurement(sensor_id=e.msg.sensor_id, t_ns=e.msg.t_ns + t0_ns,
-                                                     seq=e.msg.seq, data=e.msg.data)
+        msg = e.msg if t0_ns == 0 and epoch == 0 else m.Measurement(
+            sensor_id=e.msg.sensor_id, t_ns=e.msg.t_ns + t0_ns, seq=e.msg.seq, data=e.msg.data, epoch=epoch)
         samples.append(Sample(e.arrival_ns + t0_ns, m.meas_key(namespace, msg.sensor_id), m.encode(msg)))
     if ref is not None and ref.u is not None:
         samples.extend(_reference_inputs(ref, namespace, t0_ns, len(truths[0].t_ns)))

@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 import difflib
 import os
+import tempfile
 from collections.abc import Callable, Sequence
 from importlib import metadata
 from pathlib import Path
@@ -55,6 +56,16 @@ def positive_float(text: str) -> float:
         raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
     if not x > 0 or x == float("inf"):
         raise argparse.ArgumentTypeError(f"must be a positive number of seconds, got {text!r}")
+    return x
+
+
+def non_negative_float(text: str) -> float:
+    try:
+        x = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not x >= 0 or x == float("inf"):
+        raise argparse.ArgumentTypeError(f"must be 0 or a positive number of seconds, got {text!r}")
     return x
 
 
@@ -176,6 +187,28 @@ def input_file(path: Path, what: str, hint: str = "") -> Path:
         raise CliError(Exit.FILE, f"{path}: is a folder, not a {what}{tail}")
     if not os.access(path, os.R_OK):
         raise CliError(Exit.FILE, f"{path}: permission denied (cannot read this {what})")
+    return path
+
+
+def output_file(path: Path, what: str, hint: str = "choose another place with -o") -> Path:
+    """`path` if a file can be written there; else CliError(FILE) saying why and what to do.
+    The nearest folder of `path` that exists is probed with a temporary file, removed at once
+    (nothing is left behind, missing folders are made later by the writer). Run before anything
+    starts, so that a bad -o fails in one line instead of after the work."""
+    tail = f"; {hint}" if hint else ""
+    if path.is_dir():
+        raise CliError(Exit.FILE, f"{path}: is a folder; give the {what}'s file name{tail}")
+    folder = path.parent.absolute()
+    while not folder.exists() and folder != folder.parent:
+        folder = folder.parent
+    try:
+        if not folder.is_dir():
+            raise NotADirectoryError(20, "not a folder")
+        fd, probe = tempfile.mkstemp(dir=folder, prefix=".fusion-probe-")
+        os.close(fd)
+        os.unlink(probe)
+    except OSError as e:
+        raise CliError(Exit.FILE, f"{path}: cannot write the {what} there ({e.strerror or e}){tail}") from None
     return path
 
 

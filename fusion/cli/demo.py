@@ -25,7 +25,7 @@ aborts at once."""
 
 EXAMPLES = """\
 examples:
-  fusion demo                                  # mix, 30 s of scenario time at 10x
+  fusion demo                                  # mix, the whole scenario (60 s) at 10x
   fusion demo -s radar2d --speed max           # a reference scenario, as fast as possible
   fusion demo -s mix --duration 300 --speed max -o /tmp/long.rrd --seed 7"""
 
@@ -83,12 +83,12 @@ def demo(args: argparse.Namespace) -> int:
     from publishers.demo import default_out, demo_report, run_demo
 
     pin_blas_threads()
-    out = args.out or default_out(args.scenario)
+    out = a.output_file(args.out or default_out(args.scenario), "recording")
     stop = threading.Event()
     span = "the whole scenario" if args.duration is None else f"{args.duration:g} s of scenario time"
     status(args, f"demo {args.scenario}: simulating {span} ...")
     _on_interrupt(stop, out)
-    with bar(enabled=wanted(args), desc=f"demo {args.scenario}", unit="meas") as b:
+    with bar(enabled=wanted(args), desc=f"demo {args.scenario}", unit="sample") as b:
         r = run_demo(scenario=args.scenario, duration_s=args.duration, out=out, seed=args.seed, speed=args.speed,
                      stop=stop, progress=b)
     print(demo_report(r))

@@ -26,7 +26,8 @@ REPLAY_EXAMPLES = """\
 examples:
   fusion replay recordings/mix.fstream                     # writes recordings/mix-replay.rrd
   fusion replay run1.fstream -c configs/service.toml -o /tmp/run1.rrd --estimates /tmp/est.jsonl
-  fusion replay run1.fstream --realtime                    # paced at the recorded arrival times"""
+  fusion replay run1.fstream --realtime                    # paced at the recorded arrival times
+  fusion replay recordings/maneuver2d.fstream --smooth     # smoothed tracks beside the filtered ones"""
 
 INSPECT_DESCRIPTION = """\
 Summarise a recording (.rrd) without a screen: time span, sensors, tracks, position RMSE against
@@ -53,6 +54,9 @@ def add(sub: Any, common: argparse.ArgumentParser) -> None:
                                                                    "(default: none)")
     yp.add_argument("--realtime", action="store_true",
                     help="pace at the recorded arrival times (default: as fast as possible)")
+    yp.add_argument("--smooth", action="store_true",
+                    help="also run a fixed-interval RTS smoother over each confirmed track and record the "
+                         "smoothed estimates beside the filtered ones (tracks/<id>/smoothed/...) (default: off)")
     yp.set_defaults(func=replay)
 
     ip = sub.add_parser("inspect", parents=[common], help="summarise a recording (.rrd) headlessly",
@@ -86,7 +90,7 @@ def replay(args: argparse.Namespace) -> int:
         _check_kind(stream, STREAM_MAGIC)
     config = None if args.config is None else a.input_file(args.config, "configuration file",
                                                            "give a service or scenario TOML")
-    out = args.out or stream.with_name(f"{stream.stem}-replay.rrd")
+    out = a.output_file(args.out or stream.with_name(f"{stream.stem}-replay.rrd"), "recording")
     from fusion.io.blas import pin_blas_threads
     from fusion.replay import replay as run_replay
 
@@ -101,12 +105,18 @@ def replay(args: argparse.Namespace) -> int:
 
         try:
             r = run_replay(stream, config=config, out=out, estimates=args.estimates, realtime=args.realtime,
-                           progress=progress)
+                           progress=progress, smooth=args.smooth)
         except KeyboardInterrupt:
             raise CliError(Exit.INTERRUPTED, f"interrupted after {done[0]} of {done[1]} samples; the partial "
                                              f"recording {out} is complete (fusion inspect {out})") from None
     line = counts_line(flat_counts(r.counts, published=r.estimates))
     print(f"replayed {r.records} samples in {duration(time.monotonic() - t0)}: {line}")
+    if args.smooth:
+        rmse = ("" if r.rmse_smoothed_m is None else
+                f": position RMSE vs truth filtered {r.rmse_filtered_m:.3f} m, smoothed {r.rmse_smoothed_m:.3f} m")
+        print(f"  smoothed {r.smoothed_tracks} tracks{rmse}")
+        for tid, why in r.smoothing_failed:
+            print(f"  track {tid} not smoothed: {why}")
     print(f"  wrote {out}" + (f" and {args.estimates}" if args.estimates else ""))
     print(f"next:  fusion inspect {out}   or   rerun {out}")
     return 0

@@ -9,6 +9,8 @@ from collections.abc import Mapping
 from typing import Any
 
 from fusion import messages as m
+from fusion.tracking.detection import Reason
+from fusion.tracking.results import Counts
 
 
 def counts_line(c: Mapping[str, Any]) -> str:
@@ -28,14 +30,12 @@ def counts_line(c: Mapping[str, Any]) -> str:
     return line + f"; published {c['published']} estimates"
 
 
-def flat_counts(c: Mapping[str, int], *, published: int) -> dict[str, Any]:
-    """A pipeline's flat counts (fusion.tracking.results.Counts.flat: "refused/<reason>" keys,
-    duplicates as "refused/duplicate") in the shape counts_line reads."""
-    refused = {k[len("refused/"):]: v for k, v in sorted(c.items()) if k.startswith("refused/") and v}
-    duplicates = refused.pop("duplicate", 0)
-    return {"received": c.get("received", 0), "applied": c.get("applied", 0), "duplicates": duplicates,
-            "refused": refused, "truth": c.get("truth", 0), "late_applied": c.get("late_applied", 0),
-            "replays": c.get("replays", 0), "published": published}
+def flat_counts(c: Counts, *, published: int) -> dict[str, Any]:
+    """A pipeline's counts (fusion.tracking.results.Counts) in the shape counts_line reads:
+    duplicates apart from the other refusals, reasons that did not happen left out."""
+    refused = {r.value: n for r, n in sorted(c.refused.items()) if n and r != Reason.DUPLICATE}
+    return {"received": c.received, "applied": c.applied, "duplicates": c.duplicates, "refused": refused,
+            "truth": c.truth, "late_applied": c.late_applied, "replays": c.replays, "published": published}
 
 
 def size(n_bytes: int) -> str:
@@ -64,9 +64,18 @@ def format_status(st: m.ServiceStatus, namespace: str) -> str:
         f"  queue      {st.queue_depth} waiting",
         "  recording  " + (f"{st.recording} ({size(st.recording_bytes)})" if st.recording else "off"),
     ]
+    if st.zenoh is not None:
+        z = st.zenoh
+        again = f", {z.reconnects} reconnects" if z.reconnects else ""
+        lines.append(f"  zenoh      {z.mode} {z.state} ({z.routers} routers, {z.peers} peers; "
+                     f"{z.connect_attempts} attempts to start{again})")
     for sensor, lat in sorted(st.latency.items()):
         lines.append(f"  latency    {sensor}: mean {lat.mean_ms:.1f} ms, p50 {lat.p50_ms:.1f}, p99 {lat.p99_ms:.1f}, "
                      f"max {lat.max_ms:.1f} ms over {lat.count} measurements")
+    for sensor, g in sorted(st.gaps.items()):
+        runs = f", {g.restarts} publisher restarts" if g.restarts else ""
+        zen = f", {g.zenoh_missed} reported missed by zenoh" if g.zenoh_missed else ""
+        lines.append(f"  seq gaps   {sensor}: {g.missing} missing, {g.filled} filled late{runs}{zen}")
     return "\n".join(lines)
 
 

@@ -61,8 +61,8 @@ def zenoh_message(text: str) -> str:
     return " ".join(_RUST_LOCATION.sub("", text).split()).rstrip(". ")
 
 
-def explain_zenoh(exc: BaseException) -> CliError:
-    """A Zenoh error as a CliError that says what to do."""
+def explain_zenoh(exc: BaseException, *, where: str = "") -> CliError:
+    """A Zenoh error as a CliError that says what to do (`where`: the command, e.g. "fusion serve")."""
     text = zenoh_message(str(exc))
     if m := re.search(r"bound to (\S+?):? \[.*(Address already in use|Permission denied|Cannot assign requested "
                       r"address)", text):
@@ -72,6 +72,10 @@ def explain_zenoh(exc: BaseException) -> CliError:
         return CliError(Exit.LISTEN, f"cannot listen on {endpoint}: {why}; {hint}")
     if m := re.search(r"Unable to connect to any of \[(.*)\]", text):
         eps = ", ".join(re.findall(r"\(([^()]+)\)", m.group(1))) or m.group(1)
+        if where.endswith("serve"):
+            return CliError(Exit.CONNECT, f"cannot connect to {eps}: nothing is listening there (tried for "
+                                          "[zenoh] connect_wait_s); start the peer or router it joins first, or "
+                                          "serve as a peer with -m peer -l tcp/127.0.0.1:PORT")
         return CliError(Exit.CONNECT, f"cannot connect to {eps}: nothing is listening there; start the service "
                                       "first (fusion serve -c configs/service.toml), or give its endpoint with -e")
     if "lookup address" in text:
@@ -84,7 +88,7 @@ def _is_zenoh_error(exc: BaseException) -> bool:
     return type(exc).__module__.split(".")[0] == "zenoh"
 
 
-def classify(exc: BaseException) -> CliError:
+def classify(exc: BaseException, *, where: str = "") -> CliError:
     """Map an exception to the CliError a person sees (anything unexpected is INTERNAL)."""
     from fusion.errors import ConfigError, FusionError, InputError
 
@@ -93,7 +97,7 @@ def classify(exc: BaseException) -> CliError:
     if isinstance(exc, ConfigError):
         return CliError(Exit.CONFIG, str(exc))
     if _is_zenoh_error(exc):
-        return explain_zenoh(exc)
+        return explain_zenoh(exc, where=where)
     if type(exc).__name__ == "NoAnswerError":
         return CliError(Exit.NO_ANSWER, str(exc))
     if isinstance(exc, InputError | FusionError):
@@ -135,7 +139,7 @@ def run(prog: str, parser: argparse.ArgumentParser, argv: list[str] | None,
         _silence_stdout()
         return Exit.BROKEN_PIPE
     except (KeyboardInterrupt, Exception) as e:
-        err = CliError(Exit.INTERRUPTED, "interrupted") if isinstance(e, KeyboardInterrupt) else classify(e)
+        err = CliError(Exit.INTERRUPTED, "interrupted") if isinstance(e, KeyboardInterrupt) else classify(e, where=where)
         if debug and not (isinstance(e, CliError) and e.code == Exit.USAGE):
             traceback.print_exc()
         try:

@@ -51,6 +51,9 @@ def add(sub: Any, common: argparse.ArgumentParser) -> None:
                     help="folder for the .rrd and .fstream files (default: the config's [recording] directory)")
     sp.add_argument("--duration", type=a.positive_float, metavar="S", help="stop after S seconds (default: run "
                                                                            "until Ctrl-C)")
+    sp.add_argument("--connect-wait", type=a.non_negative_float, metavar="S",
+                    help="a client keeps trying to reach its peer or router for S seconds at start, with backoff "
+                         "(default: the config's [zenoh] connect_wait_s, 30; 0: try once)")
     sp.set_defaults(func=serve)
 
     rp = sub.add_parser("record", parents=[common], help="record measurement and truth samples to a .fstream",
@@ -72,6 +75,8 @@ def serve(args: argparse.Namespace) -> int:
     path = a.input_file(args.config, "configuration file", "the shipped one is configs/service.toml")
     cfg = load_service_config(path)
     zc = a.zenoh_overrides(args, cfg.zenoh)
+    if args.connect_wait is not None:
+        zc = msgspec.structs.replace(zc, connect_wait_s=args.connect_wait)
     mode, listen, connect = zc.mode, zc.listen, zc.connect
     cfg = msgspec.structs.replace(cfg, zenoh=zc)
     if args.namespace:
@@ -85,6 +90,8 @@ def serve(args: argparse.Namespace) -> int:
     signal.signal(signal.SIGINT, lambda *_: svc.stop())
     t0 = time.monotonic()
     svc.open()
+    if svc.session is None:  # stopped while connecting
+        raise KeyboardInterrupt
     from fusion.io.gc_tuning import settle_garbage_collector
 
     settle_garbage_collector()  # after start-up: see fusion.io.gc_tuning for the measured cost
@@ -108,7 +115,8 @@ def _written(svc: Any) -> list[Path]:
 
 def record(args: argparse.Namespace) -> int:
     zc = a.client_zenoh(args)
-    out = args.out or Path("recordings") / f"{args.namespace}-{time.strftime('%Y%m%dT%H%M%S', time.gmtime())}.fstream"
+    stamp = time.strftime("%Y%m%dT%H%M%S", time.gmtime())
+    out = a.output_file(args.out or Path("recordings") / f"{args.namespace}-{stamp}.fstream", "stream file")
     import zenoh
 
     from fusion.io.recorder import Recorder

@@ -8,11 +8,13 @@ Update with z ~ N(h(x), R), H = dh/dx at x-:
     x+ = x- + K y                    P+ = (I - K H) P- (I - K H)' + K R K'   (Joseph form)
     NIS = y' S^-1 y = |L^-1 y|^2     log-likelihood = -(NIS + log det S + m log 2 pi) / 2
 
-Two implementations of the same equations: `predict_arrays` and `update_arrays` broadcast
-over leading dimensions (numpy), so a stack of N tracks is one call (the tracker's batched
-gate); `KalmanFilter` and `ExtendedKalmanFilter` step one state with the compiled kernels of
+`KalmanFilter` and `ExtendedKalmanFilter` step one state with the compiled kernels of
 fusion.core.compiled, which evaluate the Joseph form expanded, P - K H P - (K H P)' + K S K'
-(algebraically the same as above). The two agree to rounding (tests/core/test_kernels.py).
+(algebraically the same as above); the tracker's batched gate loops the same kernels over a
+stack (fusion.core.compiled_stack). `predict_arrays` and `update_arrays` are a plain numpy
+reference of the equations above, broadcast over leading dimensions, with the product Joseph
+form; the tracker does not call them (tests/core/test_kernels.py checks the compiled kernels
+against them, bench/core_step.py times them). They agree to rounding.
 """
 
 from __future__ import annotations

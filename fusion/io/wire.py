@@ -52,7 +52,7 @@ def detection_of(msg: m.Measurement, arrival_ns: int | None = None) -> Detection
         z = np.array(vals, dtype=np.float64)
         if d.has_noise:
             R = diagonal_R(tuple(std))  # type: ignore[arg-type]
-    return Detection(msg.sensor_id, msg.t_ns, msg.seq, z, R, arrival_ns)
+    return Detection(msg.sensor_id, msg.t_ns, msg.seq, z, R, arrival_ns, msg.epoch)
 
 
 _DIAGONALS: dict[tuple[float, ...], np.ndarray] = {}
@@ -159,6 +159,8 @@ def encode_status(status: dict[str, Any]) -> bytes:
         uptime_s=status["uptime_s"], counts=m.Counts(**c), tracks=status["tracks"],
         latency={k: m.LatencyStats(**asdict(v)) for k, v in status["latency"].items()},
         recording=status["recording"], recording_bytes=status["recording_bytes"], queue_depth=status["queue_depth"],
+        gaps={k: m.SeqGapStats(**v) for k, v in status.get("gaps", {}).items()},
+        zenoh=m.ZenohLink(**status["zenoh"]) if status.get("zenoh") else None,
     )
     return m.encode(msg)
 

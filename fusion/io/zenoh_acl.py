@@ -11,8 +11,14 @@ on its peer publishes and answers without a rule.
 With NS the namespace, what each role may do (everything else is dropped):
 
   sensor X      put fusion/NS/meas/X; see the service's subscription on fusion/NS/meas/*
-                (declare_subscriber, egress) so its publisher matches
-  simulator     put fusion/NS/meas/* and fusion/NS/truth/*; see subscriptions on them
+                (declare_subscriber, egress) so its publisher matches; and what zenoh's
+                advanced publisher needs under fusion/NS/meas/X/@adv/pub/** (its token, cache
+                queryable and heartbeats in, the service's history and recovery queries out
+                (those also on fusion/NS/meas/*/@adv/*/**), their replies in) and to see the
+                service's subscriber token
+                (fusion/NS/meas/*/@adv/sub/**: the token out, the liveliness query for it in)
+  simulator     put fusion/NS/meas/* and fusion/NS/truth/*; see subscriptions on them; the
+                advanced publisher's exchanges as for a sensor, on fusion/NS/meas/*
   consumer      subscribe fusion/NS/tracks/* and receive its puts; query fusion/NS/status and
                 fusion/NS/snapshot and receive the replies
   recorder      subscribe fusion/NS/meas/* and fusion/NS/truth/* and receive their puts
@@ -33,6 +39,7 @@ from typing import Any
 from fusion.config import AccessControlConfig
 
 PUT, SUB, QUERY, REPLY, QUERYABLE = "put", "declare_subscriber", "query", "reply", "declare_queryable"
+TOKEN, LIVE_QUERY = "liveliness_token", "liveliness_query"
 IN, OUT = "ingress", "egress"
 
 
@@ -47,9 +54,11 @@ def role_grants(role: str, ns: str, *, sensor_id: str = "") -> list[tuple[str, s
     k = _keys(ns)
     queries = [k["status"], k["snapshot"]]
     if role == "sensor":
-        return [(PUT, IN, [f"fusion/{ns}/meas/{sensor_id}"]), (SUB, OUT, [k["meas"]])]
+        return [(PUT, IN, [f"fusion/{ns}/meas/{sensor_id}"]), (SUB, OUT, [k["meas"]]),
+                *_recoverable_publisher([f"fusion/{ns}/meas/{sensor_id}"], k["meas"])]
     if role == "simulator":
-        return [(PUT, IN, [k["meas"], k["truth"]]), (SUB, OUT, [k["meas"], k["truth"]])]
+        return [(PUT, IN, [k["meas"], k["truth"]]), (SUB, OUT, [k["meas"], k["truth"]]),
+                *_recoverable_publisher([k["meas"]], k["meas"])]
     if role == "consumer":
         return [(SUB, IN, [k["tracks"]]), (PUT, OUT, [k["tracks"]]), (QUERY, IN, queries), (REPLY, OUT, queries)]
     if role == "recorder":
@@ -59,6 +68,22 @@ def role_grants(role: str, ns: str, *, sensor_id: str = "") -> list[tuple[str, s
                 (SUB, IN, [k["meas"], k["truth"]]), (PUT, OUT, [k["meas"], k["truth"]]),
                 (QUERY, OUT, queries)]
     raise ValueError(f"unknown role {role!r}")
+
+
+def _recoverable_publisher(own: list[str], subscribed: str) -> list[tuple[str, str, list[str]]]:
+    """What zenoh's advanced publisher on the keys `own` (fusion.io.zenoh_advanced) exchanges
+    with the service's advanced subscriber on `subscribed`: its liveliness token and cache
+    queryable under `<key>/@adv/pub/**` in, heartbeats in, history and recovery queries out and
+    their replies in; the subscriber's token (`<subscribed>/@adv/sub/**`) out, and the query
+    for it in (the publisher waits for it)."""
+    adv_pub = [f"{key}/@adv/pub/**" for key in own]
+    adv_sub = [f"{subscribed}/@adv/sub/**"]
+    # the recovery of a hole asks <subscribed>/@adv/*/<zid>/<eid>/**: only the publisher with
+    # that id has a queryable there, so the query reaches no other sensor's cache
+    recovery = [f"{subscribed}/@adv/*/**"]
+    return [(TOKEN, IN, adv_pub), (QUERYABLE, IN, adv_pub), (PUT, IN, adv_pub), (QUERY, OUT, [*adv_pub, *recovery]),
+            (REPLY, IN, [*own, *adv_pub]), (SUB, OUT, [f"{subscribed}/@adv/pub/**"]),
+            (TOKEN, OUT, adv_sub), (LIVE_QUERY, IN, [f"{key}/@adv/sub/**" for key in own])]
 
 
 def access_control_section(ac: AccessControlConfig, *, namespace: str) -> dict[str, Any]:

@@ -13,6 +13,7 @@ import ipaddress
 import json
 import logging
 import socket
+import threading
 import time
 from collections.abc import Sequence
 from pathlib import Path
@@ -70,7 +71,8 @@ def zenoh_json(zc: ZenohConfig, *, namespace: str | None = None) -> dict[str, An
     elif not zc.connect:
         raise ConfigError("a client needs at least one connect endpoint")
     if zc.connect:
-        conf["connect"] = {"endpoints": list(zc.connect)}
+        conf["connect"] = {"endpoints": list(zc.connect), "retry": {
+            "period_init_ms": 100, "period_max_ms": round(zc.retry_max_s * 1000), "period_increase_factor": 2}}
     if zc.tls is not None:
         conf["transport"] = {"link": {"protocols": ["tls"], "tls": _tls_json(zc, listen)}}
     if zc.access_control is not None:
@@ -159,6 +161,40 @@ def cli_zenoh_config(*, zenoh_file: str | Path | None = None, listen: Sequence[s
     elif connect:
         base = msgspec.structs.replace(base, connect=list(connect))
     return base
+
+
+def open_with_retry(zc: ZenohConfig, *, namespace: str | None = None,
+                    stop: threading.Event | None = None) -> tuple[Any, int]:
+    """(session, attempts): zenoh.open, retried while a client finds nothing to connect to, for
+    at most zc.connect_wait_s, waiting 0.1 s, 0.2 s, ... (at most zc.retry_max_s) between tries;
+    each failure is logged. Other errors, and the last failure, are raised. (None, attempts)
+    when `stop` is set while waiting."""
+    import zenoh
+
+    conf_json = json.dumps(zenoh_json(zc, namespace=namespace))
+    deadline = time.monotonic() + zc.connect_wait_s
+    wait_s, attempts = 0.1, 0
+    while True:
+        attempts += 1
+        try:
+            return zenoh.open(zenoh.Config.from_json5(conf_json)), attempts
+        except zenoh.ZError as e:
+            left = deadline - time.monotonic()
+            if zc.mode != "client" or "Unable to connect" not in str(e) or left <= 0:
+                raise
+            wait_s = min(wait_s, left)
+            log.info("connecting: nothing listens at %s yet (attempt %d); retrying in %.1f s, for %.0f s more",
+                        ", ".join(zc.connect), attempts, wait_s, left)
+            if stop is not None and stop.wait(wait_s):
+                return None, attempts
+            if stop is None:
+                time.sleep(wait_s)
+            wait_s = min(wait_s * 2, zc.retry_max_s)
+
+
+def connection_of(session: Any) -> tuple[int, int]:
+    """(routers, peers) the session is connected to right now."""
+    return len(list(session.info.routers_zid())), len(list(session.info.peers_zid()))
 
 
 def free_tcp_port() -> int:

@@ -19,7 +19,7 @@ class Reason(StrEnum):
     UNKNOWN_SENSOR = "unknown_sensor"
     UNSUPPORTED_VERSION = "unsupported_version"  # a message of a schema version this build does not read
     KEY_MISMATCH = "key_mismatch"  # a sample whose payload names another sensor (or target) than its key
-    DUPLICATE = "duplicate"  # same (sensor_id, seq) seen before
+    DUPLICATE = "duplicate"  # same (sensor_id, epoch, seq, t_ns) seen before
     TOO_LATE = "too_late"  # older than the out-of-order window
     FUTURE = "future"  # further ahead of the newest time than the tolerance
 
@@ -31,7 +31,8 @@ class Detection:
     Cartesian sensors: z = position (d,). Radar (2-D): [range_m, bearing_rad] or
     [range_m, bearing_rad, range_rate_mps]; radar (3-D): [range_m, azimuth_rad, elevation_rad]
     with an optional range rate last. R is the noise covariance; None takes the sensor's default.
-    arrival_ns: when it arrived (the intake's clock), None when unknown.
+    arrival_ns: when it arrived (the intake's clock), None when unknown. epoch: the publisher's
+    boot id (0: none given); (sensor_id, epoch, seq, t_ns) identifies a measurement.
     """
 
     sensor_id: str
@@ -40,6 +41,7 @@ class Detection:
     z: Array
     R: Array | None = None
     arrival_ns: int | None = None
+    epoch: int = 0
 
     @property
     def key(self) -> tuple[int, str, int]:
@@ -48,10 +50,11 @@ class Detection:
 
     @classmethod
     def of(cls, sensor_id: str, t_ns: int, seq: int, z: object, R: object | None = None,
-           arrival_ns: int | None = None) -> Detection:
+           arrival_ns: int | None = None, *, epoch: int = 0) -> Detection:
         return cls(
             sensor_id, int(t_ns), int(seq), np.asarray(z, dtype=np.float64),
             None if R is None else np.asarray(R, dtype=np.float64), None if arrival_ns is None else int(arrival_ns),
+            int(epoch),
         )
 
 

@@ -11,7 +11,8 @@ batched:
      times, data judged future do not count towards the clock; without them the data are the
      only clock, so they count, and k + 1 that agree on a jump move it on), as too_late when
      t < horizon (or before a scan the history had to commit early), as duplicate when
-     (source, seq, t_ns) was accepted before.
+     (source, epoch, seq, t_ns) was accepted before (epoch: the publisher's boot id, so a
+     restarted publisher counting seq from 0 again is told apart from a replay).
 """
 
 from __future__ import annotations
@@ -30,7 +31,7 @@ from fusion.tracking.detection import ControlInput, Detection, Reason, Refusal
 from fusion.tracking.models import SensorModel
 from fusion.tracking.results import ScanKey
 
-Identity = tuple[str, int, int]  # (sensor_id, seq, t_ns)
+Identity = tuple[str, int, int, int]  # (sensor_id, seq, t_ns, epoch)
 
 
 class Intake:
@@ -57,7 +58,7 @@ class Intake:
         the reason it is refused. An accepted detection is remembered for duplicates."""
         d, bad = self.validate(d)
         if bad is None:
-            bad = self._window(d.sensor_id, d.t_ns, d.seq, d.arrival_ns)
+            bad = self._window(d.sensor_id, d.t_ns, d.seq, d.arrival_ns, d.epoch)
         return (None, bad) if bad is not None else (d, None)
 
     def admit_input(self, c: ControlInput) -> tuple[ControlInput | None, Refusal | None]:
@@ -73,7 +74,7 @@ class Intake:
             bad = self._window(c.source_id, c.t_ns, c.seq, c.arrival_ns)
         return (None, bad) if bad is not None else (c, None)
 
-    def _window(self, source: str, t_ns: int, seq: int, arrival_ns: int | None) -> Refusal | None:
+    def _window(self, source: str, t_ns: int, seq: int, arrival_ns: int | None, epoch: int = 0) -> Refusal | None:
         """The clocks, the window and the duplicate set (see the module docstring)."""
         clocks = self.clocks
         if arrival_ns is None:  # no other clock: the data's own times, k + 1 that agree move it
@@ -93,17 +94,17 @@ class Intake:
         if w is not None and (self.horizon_ns is None or w - self.lag_ns > self.horizon_ns):
             self.horizon_ns = w - self.lag_ns
         if self.horizon_ns is None:
-            return self._new(source, t_ns, seq)
+            return self._new(source, t_ns, seq, epoch)
         if t_ns < self.horizon_ns:
             return Refusal(source, t_ns, seq, Reason.TOO_LATE,
                            f"{(self.horizon_ns - t_ns) / 1e9:.3f} s before the out-of-order window")
         if self.committed is not None and (t_ns, source) <= self.committed:
             return Refusal(source, t_ns, seq, Reason.TOO_LATE,
                            "before a scan the history committed early (max_lag_scans)")
-        return self._new(source, t_ns, seq)
+        return self._new(source, t_ns, seq, epoch)
 
-    def _new(self, source: str, t_ns: int, seq: int) -> Refusal | None:
-        ident = (source, seq, t_ns)
+    def _new(self, source: str, t_ns: int, seq: int, epoch: int) -> Refusal | None:
+        ident = (source, seq, t_ns, epoch)
         if ident in self._seen:
             return Refusal(source, t_ns, seq, Reason.DUPLICATE, f"seq {seq} of {source} at this time seen before")
         self._seen.add(ident)
@@ -113,12 +114,12 @@ class Intake:
         """Detections of committed scans: nothing before the horizon is admitted, so their
         identities need not be kept."""
         for d in dets:
-            self._seen.discard((d.sensor_id, d.seq, d.t_ns))
+            self._seen.discard((d.sensor_id, d.seq, d.t_ns, d.epoch))
 
     def forget_inputs(self, inputs: list[tuple[int, int]]) -> None:
         """(t_ns, seq) of committed control inputs."""
         for t, seq in inputs:
-            self._seen.discard((self.control_source, seq, t))
+            self._seen.discard((self.control_source, seq, t, 0))
 
     def commit(self, key: ScanKey) -> None:
         if self.committed is None or key > self.committed:
@@ -145,7 +146,7 @@ class Intake:
         for v in zl:
             if not -math.inf < v < math.inf:
                 return d, _no(d, Reason.INVALID, "z holds NaN or inf")
-        if not sm.is_cartesian and not zl[0] > 0:
+        if sm.is_radar and not zl[0] > 0:
             return d, _no(d, Reason.INVALID, f"range must be > 0, got {zl[0]}")
         m = len(zl)
         R = d.R
@@ -154,7 +155,7 @@ class Intake:
             if R is None:
                 return d, _no(d, Reason.INVALID, f"no noise: the message carries none and sensor {d.sensor_id} "
                               "has no default in the configuration")
-            return Detection(d.sensor_id, d.t_ns, d.seq, z, R, d.arrival_ns), None
+            return Detection(d.sensor_id, d.t_ns, d.seq, z, R, d.arrival_ns, d.epoch), None
         if self._valid_R.get((d.sensor_id, m)) is R:
             return d, None
         if _positive_diagonal(R, m):
@@ -165,7 +166,7 @@ class Intake:
             R = as_covariance("R", R, m)
         except InputError as e:
             return d, _no(d, Reason.BAD_COVARIANCE, str(e))
-        return Detection(d.sensor_id, d.t_ns, d.seq, z, R, d.arrival_ns), None
+        return Detection(d.sensor_id, d.t_ns, d.seq, z, R, d.arrival_ns, d.epoch), None
 
 
 def _positive_diagonal(R: np.ndarray, m: int) -> bool:

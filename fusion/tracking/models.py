@@ -9,6 +9,7 @@ import numpy as np
 
 from fusion.config import (
     CartesianSensorConfig,
+    CustomSensorConfig,
     MotionConfig,
     RadarSensorConfig,
     SensorConfig,
@@ -38,7 +39,8 @@ def motion_model(cfg: MotionConfig, *, control: bool = False) -> MotionModel:
     if cfg.model == "cv":
         return ConstantVelocity(ndim=cfg.ndim, q=_q(cfg.accel_psd_m2s3), with_control=control)
     if cfg.model == "ca":
-        return ConstantAcceleration(ndim=cfg.ndim, q=_q(cfg.accel_psd_m2s3))
+        assert cfg.jerk_psd_m2s5 is not None  # required for "ca" (TrackerConfig checks)
+        return ConstantAcceleration(ndim=cfg.ndim, q=_q(cfg.jerk_psd_m2s5))
     if cfg.model == "ct":
         return CoordinatedTurn(q_accel=_q(cfg.accel_psd_m2s3), q_turn=_q(cfg.turn_psd_rad2s3))
     if cfg.model == "custom":
@@ -98,6 +100,10 @@ class SensorModel:
     def is_cartesian(self) -> bool:
         return isinstance(self.config, CartesianSensorConfig)
 
+    @property
+    def is_radar(self) -> bool:
+        return isinstance(self.config, RadarSensorConfig)
+
     def model(self, m: int) -> MeasurementModel | None:
         return self.by_dim.get(m)
 
@@ -119,8 +125,12 @@ class SensorModel:
         """Measured points (k, d) in world coordinates of measurements Z (k, m) with noise R
         (k, m, m) of one dimension, and a per-axis variance bounding each point's spread:
         Rot R Rot' on the diagonal for a position sensor; for a radar the largest spread,
-        R_range + r^2 (R_bearing (+ R_elevation)), on every axis."""
+        R_range + r^2 (R_bearing (+ R_elevation)), on every axis; for a custom model the
+        diagonal of its position_cov(z, R), point by point."""
         model = self.by_dim[Z.shape[1]]
+        if isinstance(self.config, CustomSensorConfig):  # one by one, the variance from position_cov
+            P = np.stack([np.asarray(model.position(z), dtype=np.float64) for z in Z])
+            return P, np.stack([np.diagonal(model.position_cov(z, r)) for z, r in zip(Z, R, strict=True)])
         P = model.position(Z)
         if self.is_cartesian:
             Rot = getattr(model, "pose", None)
@@ -155,7 +165,11 @@ def sensor_models(cfg: TrackerConfig, motion: MotionModel) -> dict[str, SensorMo
         by_dim: dict[int, MeasurementModel] = {}
         default: dict[int, Array | None] = {}
         pose = {"heading_rad": s.heading_rad} | ({"pitch_rad": s.pitch_rad, "roll_rad": s.roll_rad} if d == 3 else {})
-        if isinstance(s, CartesianSensorConfig):
+        if isinstance(s, CustomSensorConfig):
+            model = custom_sensor(s, n, d)
+            by_dim[model.ndim_meas] = model
+            default[model.ndim_meas] = np.asarray(model.R, dtype=np.float64)
+        elif isinstance(s, CartesianSensorConfig):
             R = None if s.std_m is None else np.diag(np.square(np.asarray(s.std_m, dtype=np.float64)))
             by_dim[d] = CartesianPosition(ndim_state=n, indices=pos_idx, R=np.eye(d) if R is None else R,
                                           position=s.position_m or None, **pose)
@@ -171,6 +185,24 @@ def sensor_models(cfg: TrackerConfig, motion: MotionModel) -> dict[str, SensorMo
                 default[m] = R
         out[s.id] = SensorModel(s, index, by_dim, default, d)
     return out
+
+
+def custom_sensor(s: CustomSensorConfig, n: int, d: int) -> MeasurementModel:
+    """A custom sensor's model, loaded and checked (fusion.models.loader), of this state."""
+    model = load_model(s.model, s.params)
+    where = f"sensor {s.id}: measurement model {s.model}"
+    if not isinstance(model, MeasurementModel):
+        raise ConfigError(f"{where}: a MeasurementModel is needed (fusion.core.measurement), got "
+                          f"{type(model).__name__}")
+    if model.ndim_state != n:
+        raise ConfigError(f"{where} has ndim_state {model.ndim_state}; the tracker's state has {n} components")
+    if model.ndim_meas > 3:
+        raise ConfigError(f"{where} has ndim_meas {model.ndim_meas}; the wire carries 1-3 components (pos_m)")
+    x = 10.0 * np.random.default_rng(0).standard_normal(n)  # the loader's first check state
+    p = np.asarray(model.position(model.h(x)), dtype=np.float64)
+    if p.shape != (d,):
+        raise ConfigError(f"{where}: position(z) must give a {d}-D world point, got shape {p.shape}")
+    return model
 
 
 def initial_covariance_diag(cfg: TrackerConfig, n: int, motion: MotionModel) -> Array:

@@ -62,7 +62,10 @@ class Tracker:
         self.position_indices = tuple(self.motion.position_indices)
         self.velocity_indices = tuple(self.motion.velocity_indices)
         gate = {m: float(chdtri(m, 1.0 - config.gate.probability)) for m in range(1, 7)}
-        q2 = max([config.motion.accel_psd_m2s3] + [m.accel_psd_m2s3 for m in config.motion.modes])
+        # the coarse gate's noise density; for "ca" its jerk density, as before the field was named so
+        mc = config.motion
+        q2 = max([(mc.jerk_psd_m2s5 or 0.0) if mc.model == "ca" else mc.accel_psd_m2s3]
+                 + [x.accel_psd_m2s3 for x in mc.modes])
         self.ctx = ScanContext(
             sensors=self.sensors, filter=self.filter, gater=make_gater(self.filter, gate, self.inputs),
             lifecycle=Lifecycle(config.lifecycle, q2),

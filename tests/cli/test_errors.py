@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import re
 import socket
+import time
 from pathlib import Path
 from typing import Any
 
@@ -59,18 +60,31 @@ def _file_cases(tmp: Path) -> dict[str, tuple[list[str], str]]:
         "serve-missing-config": (["fusion", "serve", "--config", "missing.toml"],
                                  r"missing\.toml: no such configuration file; the shipped one is configs/service"),
         "publish-missing-config": (["fusion-publish", "-c", "missing.toml"], r"missing\.toml: no such scenario file"),
+        "demo-unwritable": (["fusion", "demo", "-s", "cv1d_a", "-o", "notes.txt/x.rrd"],
+                            r"notes\.txt/x\.rrd: cannot write the recording there \(not a folder\); choose another"),
+        "replay-unwritable": (["fusion", "replay", "real.fstream", "-o", "notes.txt/y.rrd"],
+                              r"notes\.txt/y\.rrd: cannot write the recording there"),
+        "record-unwritable": (["fusion", "record", "-o", "notes.txt/z.fstream"],
+                              r"notes\.txt/z\.fstream: cannot write the stream file there"),
     }
 
 
 @pytest.mark.parametrize("case", [
     "inspect-missing", "inspect-folder", "inspect-stream", "inspect-text", "inspect-empty", "replay-missing",
-    "replay-recording", "serve-missing-config", "publish-missing-config"])
+    "replay-recording", "serve-missing-config", "publish-missing-config", "demo-unwritable", "replay-unwritable",
+    "record-unwritable"])
 def test_missing_or_wrong_files(case: str, tmp_path: Path) -> None:
     argv, expected = _file_cases(tmp_path)[case]
+    if case == "replay-unwritable":  # a real stream file, so that only the output is wrong
+        from fusion.io.streamfile import StreamWriter
+
+        StreamWriter(tmp_path / "real.fstream", namespace="demo").close()
     r = run(*argv, cwd=tmp_path)
     assert r.returncode == Exit.FILE, r.stderr
     line = one_error_line(r)
     assert re.search(expected, line), line
+    assert not (tmp_path / "recordings").exists(), "nothing is written when a file is wrong"
+    assert not list(tmp_path.glob(".fusion-probe-*")), "the probe of a folder leaves nothing behind"
 
 
 @pytest.mark.parametrize(("text", "expected"), [
@@ -80,7 +94,8 @@ def test_missing_or_wrong_files(case: str, tmp_path: Path) -> None:
     ('namspace = "x"\n' + GOOD_SENSORS,
      r"bad\.toml:1: namspace: unknown key 'namspace'; did you mean 'namespace'\? \(keys here: tracker, namespace"),
     (GOOD_SENSORS + '[[tracker.sensors]]\nid = "r"\nkind = "radr"\n',
-     r"bad\.toml:7: tracker\.sensors\[1\]\.kind: 'radr' is not one of 'cartesian', 'radar'; did you mean 'radar'\?"),
+     r"bad\.toml:7: tracker\.sensors\[1\]\.kind: 'radr' is not one of 'cartesian', 'radar', 'custom'; "
+     r"did you mean 'radar'\?"),
     (GOOD_SENSORS + "[tracker.gate]\nprobability = 2.0\n",
      r"bad\.toml:6: tracker\.gate\.probability: Expected float < 1\.0, got 2\.0"),
     ('namespace = "x"\n', r"bad\.toml: required key 'tracker' is missing"),
@@ -126,6 +141,24 @@ def test_nothing_to_connect_to(tmp_path: Path) -> None:
         assert f"cannot connect to {ep}: nothing is listening there; start the service first (fusion serve" in line
         assert ".rs:" not in line, "no Rust source paths"
     assert not list(tmp_path.rglob("*.fstream")), "record wrote nothing"
+
+
+def test_serve_as_a_client_with_nothing_to_connect_to(tmp_path: Path) -> None:
+    """`fusion serve -m client` retries for --connect-wait (saying so in its log), then gives up
+    with a hint for serve itself (not "start the service first"), and writes nothing."""
+    ep = f"tcp/127.0.0.1:{free_tcp_port()}"
+    config = str(SERVICE_TOML)
+    t0 = time.monotonic()
+    r = run("fusion", "serve", "-c", config, "-m", "client", "-e", ep, "--connect-wait", "0.5", cwd=tmp_path)
+    assert r.returncode == Exit.CONNECT, r.stderr
+    assert time.monotonic() - t0 >= 0.5
+    assert re.search(r"connecting: nothing listens at .* \(attempt 2\); retrying", r.stderr), r.stderr
+    last = r.stderr.strip().splitlines()[-1]
+    assert f"fusion serve: error: cannot connect to {ep}: nothing is listening there" in last
+    assert "start the peer or router it joins first" in last and "start the service first" not in last
+    r = run("fusion", "serve", "-q", "-c", config, "-m", "client", "-e", ep, "--connect-wait", "0", cwd=tmp_path)
+    assert r.returncode == Exit.CONNECT and "start the peer or router" in one_error_line(r)
+    assert not list(tmp_path.rglob("*.rrd")) and not list(tmp_path.rglob("*.fstream")), "serve wrote files"
 
 
 def test_no_service_answers(zenoh_hub: tuple[Any, str], tmp_path: Path) -> None:

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from fusion import messages as m
 from fusion.cli.report import counts_line, flat_counts, format_status, format_tracks
+from fusion.tracking.detection import Reason
+from fusion.tracking.results import Counts
 
 BASE = {"received": 838, "applied": 530, "duplicates": 4, "refused": {"invalid": 4}, "queued": 0, "truth": 300,
         "late_applied": 8, "replays": 1, "published": 389}
@@ -17,9 +19,9 @@ def test_counts_line_says_measurements_not_truth_samples() -> None:
 
 
 def test_flat_pipeline_counts() -> None:
-    flat = {"received": 838, "truth": 300, "applied": 530, "refused/duplicate": 4, "refused/invalid": 4,
-            "refused/future": 0, "late_applied": 8, "replays": 1}
-    assert counts_line(flat_counts(flat, published=389)) == LINE
+    c = Counts(received=838, truth=300, applied=530, late_applied=8, replays=1,
+               refused={Reason.DUPLICATE: 4, Reason.INVALID: 4, Reason.FUTURE: 0})
+    assert counts_line(flat_counts(c, published=389)) == LINE
 
 
 def test_queued_and_no_late() -> None:

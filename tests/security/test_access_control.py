@@ -227,3 +227,46 @@ def test_profile_on_a_router_with_the_service_as_a_client(certs: Certs, tmp_path
     assert svc.published > 0 and len(tracks.key_list()) == svc.published
     assert m.track_key(ns, 999) not in tracks.key_list()
     assert len(status) == 1 and m.decode_status(status[0]).counts.received == received
+
+
+def test_a_sensors_dropped_measurements_are_recovered_under_access_control(certs: Certs, tmp_path: Path) -> None:
+    """Zenoh's advanced publisher under the sensor role: cam1's seq 3, 4 and 9 are dropped as
+    they leave it (a low-pass filter on its session); the service recovers all three from its
+    cache (a hole, then the heartbeat for the last one), and cam1 still may not publish for
+    radar1 nor query the status."""
+    import zenoh
+
+    from fusion.io.zenoh_advanced import declare_recoverable_publisher, wait_for_recovering_subscriber
+
+    cfg, _ = _mix(1.0)
+    ns = cfg.namespace
+
+    def cam1(seq: int, *, big: bool = False) -> bytes:
+        return m.encode(m.Measurement(sensor_id="cam1", t_ns=seq * 200_000_000, seq=seq, data=m.Cartesian(
+            pos_m=[100.0 + seq, 0.0], cov_m2=[1.0, 0.0, 0.0, 1.0] if big else None)))
+
+    small = max(len(cam1(s)) for s in range(10))
+    with tls_service(cfg, certs, tmp_path, access_control=ACL) as (svc, endpoint):
+        conf = zenoh_json(ZenohConfig(mode="client", listen=[], connect=[endpoint], tls=certs.tls("sensor-cam1")))
+        conf["low_pass_filter"] = [{"flows": ["egress"], "messages": ["put"], "key_exprs": [f"fusion/{ns}/meas/**"],
+                                    "size_limit": small}]
+        cam = zenoh.open(zenoh.Config.from_json5(json.dumps(conf)))
+        try:
+            pub = declare_recoverable_publisher(cam, m.meas_key(ns, "cam1"), cache_samples=100, heartbeat_s=0.1)
+            assert wait_for_recovering_subscriber(cam, m.meas_key(ns, "cam1"), timeout_s=5.0)
+            time.sleep(PROPAGATION_S)  # the publisher's cache queryable must reach the service first
+            for seq in range(10):
+                pub.put(cam1(seq, big=seq in (3, 4, 9)))
+            deadline = time.monotonic() + 10.0
+            while svc.status_dict()["counts"]["applied"] < 10 and time.monotonic() < deadline:
+                time.sleep(0.02)
+            cam.put(m.meas_key(ns, "radar1"), cam1(20))
+            status_by_sensor = _replies(cam, m.status_key(ns))
+            assert svc.wait_idle(timeout_s=30.0)
+            st = svc.status_dict()
+            pub.undeclare()
+        finally:
+            cam.close()
+    assert st["counts"]["received"] == st["counts"]["applied"] == 10, (st["counts"], st["gaps"])
+    assert st["gaps"]["cam1"]["missing"] == 0 and "zenoh_missed" not in st["gaps"]["cam1"], st["gaps"]
+    assert status_by_sensor == []

@@ -140,12 +140,17 @@ def test_access_control_profile() -> None:
                              simulators=["sim"], consumers=["view"], recorders=["rec"], services=["svc"])
     g = _grants(ac)
     ingress = {(cn, msg, k) for cn, msg, flow, k in g if flow == "ingress"}
+    adv = {"s-cam1": "fusion/ns/meas/cam1", "s-radar1": "fusion/ns/meas/radar1",
+           "s-radar1-spare": "fusion/ns/meas/radar1", "sim": "fusion/ns/meas/*"}  # advanced publishers' keys
     assert {x for x in ingress if x[1] == "put"} == {
         ("s-cam1", "put", "fusion/ns/meas/cam1"), ("s-radar1", "put", "fusion/ns/meas/radar1"),
         ("s-radar1-spare", "put", "fusion/ns/meas/radar1"), ("sim", "put", "fusion/ns/meas/*"),
-        ("sim", "put", "fusion/ns/truth/*"), ("svc", "put", "fusion/ns/tracks/*")}
+        ("sim", "put", "fusion/ns/truth/*"), ("svc", "put", "fusion/ns/tracks/*"),
+        *((cn, "put", f"{k}/@adv/pub/**") for cn, k in adv.items())}  # heartbeats
     assert {x for x in ingress if x[1] in ("declare_queryable", "reply")} == {
-        ("svc", m, k) for m in ("declare_queryable", "reply") for k in ("fusion/ns/status", "fusion/ns/snapshot")}
+        *(("svc", m, k) for m in ("declare_queryable", "reply") for k in ("fusion/ns/status", "fusion/ns/snapshot")),
+        *((cn, "declare_queryable", f"{k}/@adv/pub/**") for cn, k in adv.items()),  # their caches
+        *((cn, "reply", r) for cn, k in adv.items() for r in (k, f"{k}/@adv/pub/**"))}
     assert {x for x in ingress if x[1] == "query"} == {
         ("view", "query", "fusion/ns/status"), ("view", "query", "fusion/ns/snapshot")}
     assert {x for x in ingress if x[1] == "declare_subscriber"} == {

@@ -40,6 +40,34 @@ def running_service(cfg: ServiceConfig, tmp: Path) -> Iterator[tuple[Service, st
         assert not t.is_alive(), "the service did not stop"
 
 
+def run_live(name: str, tmp: Path, *, duration_s: float | None = None, speed: float = 0.0
+             ) -> tuple[ServiceConfig, list[Any], dict[str, int], list[m.Estimate], Service]:
+    """The scenario through the live service, a subscriber collecting the estimates: (service
+    config, samples, publisher counts, estimates received, the stopped service). The service's
+    stream file is tmp/live.fstream, its recording tmp/live.rrd."""
+    from publishers.publish import publish
+    from publishers.stream import build_stream
+
+    spec, cfg = scenario_config(name)
+    if duration_s is not None:
+        spec = msgspec.structs.replace(spec, duration_s=duration_s)
+    samples, _ = build_stream(spec, namespace=cfg.namespace)
+    with running_service(cfg, tmp) as (svc, endpoint):
+        sub_session = client(endpoint)
+        try:
+            col = EstimateCollector(sub_session, cfg.namespace)
+            pub_session = client(endpoint)
+            try:
+                counts = publish(pub_session, samples, speed=speed, match_timeout_s=5.0)
+            finally:
+                pub_session.close()
+            assert svc.wait_idle(timeout_s=60.0)
+            got = col.all_of(svc)
+        finally:
+            sub_session.close()
+    return cfg, samples, counts, got, svc
+
+
 def client(endpoint: str) -> Any:
     import zenoh
 
@@ -67,6 +95,13 @@ class EstimateCollector:
         with self._lock:
             return list(self.got)
 
+    def all_of(self, svc: Service, *, timeout_s: float = 5.0) -> list[m.Estimate]:
+        """Every estimate, once as many arrived as `svc` published (or the timeout passed)."""
+        deadline = time.monotonic() + timeout_s
+        while len(self.snapshot()) < svc.published and time.monotonic() < deadline:
+            time.sleep(0.01)
+        return self.snapshot()
+
 
 def latest(estimates: list[m.Estimate], *, keep_revision: bool = True) -> dict[tuple[int, int, str], m.Estimate]:
     """The consumer's view: latest revision per (track, time, sensor); retractions remove.
@@ -86,7 +121,68 @@ def latest(estimates: list[m.Estimate], *, keep_revision: bool = True) -> dict[t
     return out
 
 
+def rrd_rows(path: Path) -> dict[str, int]:
+    """Rows per entity of a recording (static rows not counted)."""
+    from collections import Counter
+
+    from rerun.chunk import RrdReader
+
+    rows: Counter[str] = Counter()
+    for ch in RrdReader(str(path)).stream():
+        if not ch.is_static:
+            rows[ch.entity_path] += ch.to_record_batch().num_rows
+    return rows
+
+
 def query(session: Any, key: str) -> bytes:
     replies = list(session.get(key, timeout=5.0))
     assert replies, f"no reply on {key}"
     return replies[0].ok.payload.to_bytes()
+
+
+class Collector:
+    """Subscribes to `key` and keeps every message received, decoded with `decode`."""
+
+    def __init__(self, session: Any, key: str, decode: Any) -> None:
+        self.got: list[Any] = []
+        self._decode = decode
+        self._lock = threading.Lock()
+        self.sub = session.declare_subscriber(key, self._cb)
+        time.sleep(0.2)  # see EstimateCollector
+
+    def _cb(self, sample: Any) -> None:
+        msg = self._decode(sample.payload.to_bytes())
+        with self._lock:
+            self.got.append(msg)
+
+    def wait_for(self, n: int, *, timeout_s: float = 5.0) -> list[Any]:
+        """Every message so far, once at least n arrived (or the timeout passed)."""
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            with self._lock:
+                if len(self.got) >= n:
+                    break
+            time.sleep(0.01)
+        with self._lock:
+            return list(self.got)
+
+
+def put_all(session: Any, samples: list[tuple[str, bytes]], *, pause_s: float = 0.0) -> None:
+    """Put (key, payload) in order, each key through a publisher the service is matched with,
+    pause_s apart."""
+    import zenoh
+
+    pubs: dict[str, Any] = {}
+    try:
+        for key, payload in samples:
+            if key not in pubs:
+                pubs[key] = session.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK)
+                deadline = time.monotonic() + 5
+                while not pubs[key].matching_status.matching and time.monotonic() < deadline:
+                    time.sleep(0.001)
+            pubs[key].put(payload)
+            if pause_s:
+                time.sleep(pause_s)
+    finally:
+        for p in pubs.values():
+            p.undeclare()

@@ -129,3 +129,15 @@ def test_ospa_hand_computed(X: np.ndarray, Y: np.ndarray, c: float, p: float, ex
 def test_gospa_hand_computed(X: np.ndarray, Y: np.ndarray, c: float, p: float, expected: float) -> None:
     assert gospa(X, Y, c=c, p=p) == pytest.approx(expected, abs=1e-12)
     assert gospa(Y, X, c=c, p=p) == pytest.approx(expected, abs=1e-12)
+
+
+def test_gospa_parts_hand_computed() -> None:
+    """Truth (0,0), (10,0); one estimate at (1,0); c = 5, p = 2: the pair costs 1, the missed
+    target c^p / 2 = 12.5, nothing false."""
+    from fusion.core.metrics import gospa_parts
+
+    g = gospa_parts(np.array([[0.0, 0.0], [10.0, 0.0]]), np.array([[1.0, 0.0]]), c=5.0, p=2.0)
+    assert (g.localisation, g.missed, g.false, g.n_missed, g.n_false) == (1.0, 12.5, 0.0, 1, 0)
+    assert g.distance == pytest.approx(np.sqrt(13.5), abs=1e-12)
+    far = gospa_parts(np.array([[0.0, 0.0]]), np.array([[6.0, 0.0]]), c=5.0, p=2.0)  # beyond c: missed + false
+    assert (far.localisation, far.missed, far.false) == (0.0, 12.5, 12.5)

@@ -19,7 +19,7 @@ RADAR = Sensor("radar", "radar", period_s=0.5, offset_s=0.25, range_std_m=2.0, b
                position_m=(-600.0, -400.0))
 MODELS = {
     "cv": MotionConfig(model="cv", accel_psd_m2s3=0.5),
-    "ca": MotionConfig(model="ca", accel_psd_m2s3=0.5),
+    "ca": MotionConfig(model="ca", jerk_psd_m2s5=0.5),
     "ct": MotionConfig(model="ct", accel_psd_m2s3=0.5, turn_psd_rad2s3=0.01),
     "imm-cv-ct": MotionConfig(model="imm", modes=[
         ModeConfig(model="cv", accel_psd_m2s3=0.25, sojourn_s=20.0),

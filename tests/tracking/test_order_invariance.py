@@ -18,7 +18,7 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from fusion.config import TimeConfig
+from fusion.config import LifecycleConfig, TimeConfig
 from tests.tracking.helpers import Consumer, data_counts, make_tracker, track_snapshot
 from tests.tracking.streams import Labeled, Sensor, constant_velocity, detect, in_order
 
@@ -40,8 +40,8 @@ def stream() -> tuple[Labeled, ...]:
     return tuple(in_order(*parts))
 
 
-def run(order: list[Labeled], batch_sizes: list[int]):
-    tracker = make_tracker(SENSORS, time=TimeConfig(lag_s=LAG_S))
+def run(order: list[Labeled], batch_sizes: list[int], lifecycle: LifecycleConfig | None = None):
+    tracker = make_tracker(SENSORS, time=TimeConfig(lag_s=LAG_S), lifecycle=lifecycle)
     consumer = Consumer()
     sizes = itertools.cycle(batch_sizes)
     i = 0
@@ -121,3 +121,78 @@ def test_a_fixed_delay_draw_exercises_replays_and_revisions() -> None:
     assert consumer.published() == ref_consumer.published()
     assert consumer.subscribed_events == ref_consumer.subscribed_events
     assert data_counts(tracker) == data_counts(ref_tracker)
+
+
+SMALL = LifecycleConfig(max_tracks=3)  # the three targets fill it: births are refused now and then
+
+
+@functools.cache
+def reference_small():
+    tracker, consumer = run(list(stream()), [1], SMALL)
+    return track_snapshot(tracker), tracker, consumer
+
+
+@settings(max_examples=15, deadline=None, derandomize=True, database=None)
+@given(delays_and_batches())
+def test_refused_births_do_not_depend_on_arrival_order(draw: tuple[list[int], list[int]]) -> None:
+    """With a small max_tracks the counts (births_refused_capacity included), tracks and events
+    are those of the in-order run: counts are derived from the final scans, not incremented by
+    the scans a late measurement makes run again."""
+    delays_ms, batch_sizes = draw
+    tracker, consumer = run(arrival_order(delays_ms), batch_sizes, SMALL)
+    ref_tracks, ref_tracker, ref_consumer = reference_small()
+    assert ref_tracker.counts.births_refused_capacity > 0
+    assert data_counts(tracker) == data_counts(ref_tracker)
+    assert track_snapshot(tracker) == ref_tracks
+    assert consumer.events == ref_consumer.events
+
+
+def test_refused_births_with_replays() -> None:
+    """One seeded draw that does replay, so the property above cannot pass vacuously."""
+    rng = np.random.default_rng(SEED + 2)
+    tracker, consumer = run(arrival_order(rng.integers(0, LAG_MS, size=len(stream())).tolist()), [2], SMALL)
+    ref_tracks, ref_tracker, _ = reference_small()
+    assert tracker.counts.replayed_scans > 10 and ref_tracker.counts.births_refused_capacity > 0
+    assert data_counts(tracker) == data_counts(ref_tracker)
+    assert track_snapshot(tracker) == ref_tracks
+
+
+def test_a_late_detection_leaves_one_deletion_per_track() -> None:
+    """Defect 2: a track deleted for misses at 1.5 s; a late detection of it at 1.0 s moves the
+    deletion to 2.5 s. The consumer, applying withdrawals, holds one "deleted" event per track,
+    the same events as the in-order run."""
+    from fusion.tracking.detection import Detection
+    from fusion.tracking.trackset import track_id_for
+
+    cam = Sensor("cam", "cartesian", std_m=1.0)
+    lifecycle = LifecycleConfig(confirm_m=1, confirm_n=1, max_misses=2, coast_s=100.0)
+    t = [k * 500_000_000 for k in range(7)]  # scans at 0, 0.5, ..., 3.0 s
+    target = [Detection.of("cam", t[0], 0, [0.0, 0.0])]
+    clutter = [Detection.of("cam", tk, 10 + k, [1000.0 * (k + 1), -1000.0 * (k + 1)]) for k, tk in enumerate(t)]
+    late = Detection.of("cam", t[2], 1, [0.0, 0.0])
+
+    reported: list[tuple[str, int, int, str]] = []
+
+    def deliver(batches: list[list[Detection]]) -> Consumer:
+        tracker = make_tracker([cam], lifecycle=lifecycle, time=TimeConfig(lag_s=5.0))
+        consumer = Consumer()
+        reported.clear()
+        for b in batches:
+            result = tracker.process(b)
+            assert not result.refused, result.refused
+            consumer.take(result)
+            reported.extend(ev.key for ev in result.events if not ev.retracted)
+        return consumer
+
+    in_order = deliver([target + clutter[:1], *([c] for c in clutter[1:2]), [late, clutter[2]],
+                        *([c] for c in clutter[3:])])
+    arrived = deliver([target + clutter[:1], *([c] for c in clutter[1:]), [late]])
+    target_id = track_id_for("cam", 0, t[0])
+    assert [k[2] for k in reported if k[:2] == ("deleted", target_id)] == [1_500_000_000, 2_500_000_000]
+    deleted: dict[int, list[int]] = {}
+    for kind, track_id, t_ns, _ in arrived.events:
+        if kind == "deleted":
+            deleted.setdefault(track_id, []).append(t_ns)
+    assert all(len(v) == 1 for v in deleted.values()), deleted
+    assert deleted[target_id] == [2_500_000_000]
+    assert arrived.events == in_order.events

@@ -133,3 +133,64 @@ def test_a_measurement_without_noise_takes_the_sensors_configured_noise() -> Non
     assert d.R is None
     d = detection_of(m.Measurement(sensor_id="c", t_ns=1, seq=0, data=m.Cartesian(pos_m=[1.0, 2.0])))
     assert d.R is None
+
+
+def test_malformed_and_invalid_are_distinct_classes() -> None:
+    import msgspec
+
+    from fusion.errors import InvalidMessageError, MalformedMessageError, UnsupportedVersionError
+
+    assert not issubclass(MalformedMessageError, InvalidMessageError)
+    assert not issubclass(InvalidMessageError, MalformedMessageError)
+    assert issubclass(UnsupportedVersionError, InvalidMessageError)
+    raw = m.encode(MEAS[0])
+    with pytest.raises(MalformedMessageError) as e:
+        m.decode_measurement(raw[:-2])
+    assert not isinstance(e.value, InvalidMessageError)
+    bad = msgspec.msgpack.decode(raw)
+    bad["seq"] = "zero"
+    with pytest.raises(InvalidMessageError) as e2:
+        m.decode_measurement(msgspec.msgpack.encode(bad))
+    assert not isinstance(e2.value, (MalformedMessageError, UnsupportedVersionError))
+
+
+@pytest.mark.parametrize("v", [0, m.SCHEMA_VERSION + 1, 2**40], ids=["zero", "next", "huge"])
+def test_the_version_is_read_as_a_value(v: int) -> None:
+    """An unsupported version is told by the message's `v`, also when other fields are wrong
+    too; a `v` that is not an integer is an invalid field."""
+    import msgspec
+
+    from fusion.errors import UnsupportedVersionError
+
+    raw = msgspec.msgpack.decode(m.encode(MEAS[0]))
+    raw.update(v=v, seq="zero")
+    with pytest.raises(UnsupportedVersionError):
+        m.decode_measurement(msgspec.msgpack.encode(raw))
+    with pytest.raises(UnsupportedVersionError):
+        m.decode_json(msgspec.json.encode(raw))
+    raw["v"] = "one"
+    with pytest.raises(m.InvalidMessageError) as e:
+        m.decode_measurement(msgspec.msgpack.encode(raw))
+    assert not isinstance(e.value, UnsupportedVersionError)
+
+
+def test_malformed_and_invalid_are_counted_apart() -> None:
+    import msgspec
+
+    from fusion.config import CartesianSensorConfig, TrackerConfig
+    from fusion.io import wire
+    from fusion.pipeline import Pipeline
+    from fusion.tracking.tracker import Tracker
+
+    cfg = TrackerConfig(sensors=[CartesianSensorConfig(id="cam1", std_m=[1.0, 1.0])])
+    pipe = Pipeline(Tracker(cfg), wire.Codec("ns"))
+    key = m.meas_key("ns", "cam1")
+    good = m.encode(m.Measurement(sensor_id="cam1", t_ns=10, seq=0, data=m.Cartesian(pos_m=[1.0, 2.0])))
+    invalid = msgspec.msgpack.encode({**msgspec.msgpack.decode(good), "seq": -1})
+    newer = msgspec.msgpack.encode({**msgspec.msgpack.decode(good), "v": m.SCHEMA_VERSION + 1})
+    records = [(1, key, good), (2, key, good[:-3]), (3, key, b"\xc1"), (4, key, invalid), (5, key, invalid),
+               (6, key, invalid), (7, key, newer)]
+    pipe.ingest(records)
+    c = pipe.counts()
+    assert c.applied == 1
+    assert {r.value: n for r, n in c.refused.items()} == {"malformed": 2, "invalid": 3, "unsupported_version": 1}
