@@ -92,6 +92,9 @@ def serve(args: argparse.Namespace) -> int:
     svc.open()
     if svc.session is None:  # stopped while connecting
         raise KeyboardInterrupt
+    from fusion.io.gc_tuning import settle_garbage_collector
+
+    settle_garbage_collector()  # after start-up: see fusion.io.gc_tuning for the measured cost
     where = f"listening on {', '.join(listen)}" if mode == "peer" else f"connected to {', '.join(connect)}"
     rec = f"recording to {svc.sink.path}" if svc.sink is not None else "not recording"
     print(f"fusion serving namespace {cfg.namespace!r} ({where}); {rec}; Ctrl-C to stop", flush=True)

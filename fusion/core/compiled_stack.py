@@ -5,6 +5,9 @@ give identical numbers), in one call per stack instead of one numpy call per ope
     predict_many:  x-_k = F_k x_k,  P-_k = F_k P_k F_k' + Q_k
     update_many:   the Joseph-form update of fusion.core.compiled.update for each k, with
                    ok_k = False where S_k is not positive definite.
+    combine_many:  moment-matched mixtures over the mode axis,
+                   x_k = sum_m w_km x_km,  P_k = sum_m w_km P_km + sum_m w_km d_km d_km'
+                   (d_km = x_km - x_k), symmetrised as (P_k + P_k') / 2.
 """
 
 from __future__ import annotations
@@ -47,6 +50,36 @@ def update_many(X: np.ndarray, P: np.ndarray, Y: np.ndarray, H: np.ndarray, R: n
         nis[k] = v
         ll[k] = lk
     return ok, Xn, Pn, S, nis, ll
+
+
+@njit(cache=True, fastmath=False)
+def combine_many(xs: np.ndarray, Ps: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    N, M, n = xs.shape
+    X = np.zeros((N, n))
+    P = np.zeros((N, n, n))
+    for k in range(N):
+        for m in range(M):
+            for a in range(n):
+                X[k, a] += w[k, m] * xs[k, m, a]
+        A = np.zeros((n, n))
+        B = np.zeros((n, n))
+        for m in range(M):
+            wm = w[k, m]
+            for a in range(n):
+                da = wm * (xs[k, m, a] - X[k, a])
+                for b in range(n):
+                    A[a, b] += wm * Ps[k, m, a, b]
+                    B[a, b] += da * (xs[k, m, b] - X[k, b])
+        for a in range(n):
+            for b in range(n):
+                P[k, a, b] = 0.5 * ((A[a, b] + B[a, b]) + (A[b, a] + B[b, a]))
+    return X, P
+
+
+def combine_stack(xs: np.ndarray, Ps: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """combine_many on float64 C-contiguous copies: xs (N, M, n), Ps (N, M, n, n), w (N, M)."""
+    c = np.ascontiguousarray
+    return combine_many(c(xs, np.float64), c(Ps, np.float64), c(w, np.float64))
 
 
 def predict_stack(X: np.ndarray, P: np.ndarray, F: np.ndarray, Q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

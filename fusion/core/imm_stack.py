@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from fusion.core.checks import Array
-from fusion.core.compiled_stack import predict_stack, update_stack
+from fusion.core.compiled_stack import combine_stack, predict_stack, update_stack
 from fusion.core.imm import IMM
 from fusion.core.kalman import ExtendedKalmanFilter
 from fusion.core.measurement import MeasurementModel
@@ -31,14 +31,6 @@ from fusion.errors import NumericalError
 def stackable(imm: IMM) -> bool:
     """Every mode an EKF over a motion model that broadcasts over stacks."""
     return all(isinstance(f, ExtendedKalmanFilter) and f.motion.broadcasts for f in imm.filters)
-
-
-def combine_stack(xs: Array, Ps: Array, w: Array) -> tuple[Array, Array]:
-    """Moment-matched mixtures over the mode axis: xs (N, M, n), Ps (N, M, n, n), w (N, M)."""
-    x = np.einsum("km,kma->ka", w, xs)
-    d = xs - x[:, None, :]
-    P = np.einsum("km,kmab->kab", w, Ps) + np.einsum("km,kma,kmb->kab", w, d, d)
-    return x, 0.5 * (P + np.swapaxes(P, -1, -2))
 
 
 @dataclass(frozen=True)

@@ -52,6 +52,7 @@ class ConstantVelocityWithTurnRate(LinearMotionModel):
         self.q_accel = self._cv.q
         self.q_turn = float(q_turn)
         self._cache: tuple[float, Array, Array] | None = None
+        self._stack_cache: tuple[Array, Array, Array] | None = None
 
     def _build(self, dt_s: float | Array) -> tuple[Array, Array]:
         dt = np.asarray(dt_s, dtype=np.float64)
@@ -65,8 +66,16 @@ class ConstantVelocityWithTurnRate(LinearMotionModel):
         return F, Q
 
     def _get(self, dt_s: float | Array) -> tuple[Array, Array]:
+        """F and Q, kept for the last dt (a float, or a stack: the stacked IMM asks for F and Q
+        of the same stack one after the other)."""
         if not isinstance(dt_s, float):
-            return self._build(dt_s)
+            c = self._stack_cache
+            if c is not None and c[0].shape == np.shape(dt_s) and np.array_equal(c[0], dt_s):
+                return c[1], c[2]
+            F, Q = self._build(dt_s)
+            F.flags.writeable = Q.flags.writeable = False  # shared by the callers of this stack
+            self._stack_cache = (np.array(dt_s, dtype=np.float64), F, Q)
+            return F, Q
         if self._cache is None or self._cache[0] != dt_s:
             self._cache = (dt_s, *self._build(dt_s))
         return self._cache[1], self._cache[2]

@@ -115,6 +115,7 @@ class _IntegratorChain(LinearMotionModel):
         self._E = np.kron(eye, E1)
         self._E2 = self._E @ self._E
         self._C = [np.kron(eye, c) * self.q**2 for c in Cs1]
+        self._C_used = [(k, C) for k, C in enumerate(self._C) if k >= 1 and C.any()]  # Q's nonzero terms
         self._I = np.eye(self.ndim_state)
         self._with_control = with_control
         self._cache_dt: float | None = None
@@ -136,9 +137,8 @@ class _IntegratorChain(LinearMotionModel):
     def _build_Q(self, dt_s: float | Array) -> Array:
         dt = _dt_array(dt_s)
         Q = np.zeros(dt.shape[:-2] + (self.ndim_state, self.ndim_state))
-        for k in range(1, len(self._C)):
-            if self._C[k].any():
-                Q = Q + self._C[k] * dt**k
+        for k, C in self._C_used:
+            Q = Q + C * dt**k
         return Q
 
     def F(self, dt_s: float | Array) -> Array:

@@ -72,6 +72,9 @@ class UnscentedKalmanFilter(FilterBase):
         self._c, self.Wm, self.Wc = self.points.weights(motion.ndim_state)
         self.state_residual = state_residual or (lambda a, b: a - b)
         self.state_mean = state_mean or (lambda X, w: w @ X)
+        # plain subtraction and weighted sums on the state: the equations then stack over many
+        # states (fusion.core.ukf_stack)
+        self.plain_state = state_residual is None and state_mean is None
 
     def sigma_points(self, x: Array, P: Array) -> Array:
         """The 2n + 1 sigma points as rows."""

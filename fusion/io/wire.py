@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable
 from dataclasses import asdict
 from typing import Any
@@ -16,7 +17,6 @@ STREAM_SUFFIX = ".fstream"
 
 status_key = m.status_key
 snapshot_key = m.snapshot_key
-track_key = m.track_key
 all_measurements_key = m.all_meas_key
 all_truth_key = m.all_truth_key
 all_input_key = m.all_input_key
@@ -28,29 +28,49 @@ def is_measurement_key(key: str) -> bool:
 
 def detection_of(msg: m.Measurement, arrival_ns: int | None = None) -> Detection:
     """The tracker's view of a wire measurement: z and R in the sensor's measurement space (R None
-    when the message carries no noise: the tracker then takes the sensor's configured one)."""
+    when the message carries no noise: the tracker then takes the sensor's configured one).
+    R = diag(std^2) for per-axis standard deviations, shared read-only between the messages that
+    carry the same ones (diagonal_R)."""
     d = msg.data
     R: np.ndarray | None = None
     if isinstance(d, m.Cartesian):
         z = np.array(d.pos_m, dtype=np.float64)
-        k = z.shape[0]
         if d.std_m is not None:
-            R = np.diag(np.square(np.array(d.std_m, dtype=np.float64)))
+            R = diagonal_R(tuple(d.std_m))
         elif d.cov_m2 is not None:
+            k = z.shape[0]
             R = np.array(d.cov_m2, dtype=np.float64).reshape(k, k)
     else:
         vals = [d.range_m, d.bearing_rad]
-        var = [d.range_std_m, d.bearing_std_rad]
+        std = [d.range_std_m, d.bearing_std_rad]
         if d.elevation_rad is not None:
             vals.append(d.elevation_rad)
-            var.append(d.elevation_std_rad)
+            std.append(d.elevation_std_rad)
         if d.range_rate_mps is not None:
             vals.append(d.range_rate_mps)
-            var.append(d.range_rate_std_mps)
+            std.append(d.range_rate_std_mps)
         z = np.array(vals, dtype=np.float64)
         if d.has_noise:
-            R = np.diag(np.square(np.array(var, dtype=np.float64)))
+            R = diagonal_R(tuple(std))  # type: ignore[arg-type]
     return Detection(msg.sensor_id, msg.t_ns, msg.seq, z, R, arrival_ns, msg.epoch)
+
+
+_DIAGONALS: dict[tuple[float, ...], np.ndarray] = {}
+_DIAGONALS_MAX = 4096
+
+
+def diagonal_R(std: tuple[float, ...]) -> np.ndarray:
+    """diag(std^2), read-only, one array per distinct std (sensors repeat theirs): a dict look-up
+    instead of three numpy calls per message. The memo is emptied when it reaches 4096 entries
+    (a sender whose stds vary per message then costs what it did without it)."""
+    R = _DIAGONALS.get(std)
+    if R is None:
+        if len(_DIAGONALS) >= _DIAGONALS_MAX:
+            _DIAGONALS.clear()
+        R = np.diag(np.square(np.array(std, dtype=np.float64)))
+        R.flags.writeable = False
+        _DIAGONALS[std] = R
+    return R
 
 
 class Codec:
@@ -58,12 +78,21 @@ class Codec:
 
     def __init__(self, ns: str) -> None:
         self.ns = ns
+        self._keys: dict[str, tuple[str, str]] = {}  # key -> (kind, id): a few keys, seen per sample
+
+    def _parsed(self, key: str) -> tuple[str, str]:
+        p = self._keys.get(key)
+        if p is None:
+            if len(self._keys) >= 4096:
+                self._keys.clear()
+            p = self._keys[key] = (m.key_kind(key), key.rsplit("/", 1)[-1])
+        return p
 
     def kind(self, key: str) -> str:
-        return m.key_kind(key)
+        return self._parsed(key)[0]
 
     def key_id(self, key: str) -> str:
-        return key.rsplit("/", 1)[-1]
+        return self._parsed(key)[1]
 
     def detection(self, payload: bytes, arrival_ns: int | None = None) -> Detection:
         """Raises MalformedMessageError or InvalidMessageError (fusion.errors) for bad bytes."""
@@ -85,13 +114,28 @@ def truth_in_layout(msg: m.Truth, layout: tuple[str, ...]) -> tuple[str, int, np
     return msg.target_id, msg.t_ns, np.array([by_name[n] for n in layout], dtype=np.float64)
 
 
+@functools.lru_cache(maxsize=64)
+def _tracks_prefix(ns: str) -> str:
+    return m.track_key(ns, 0)[:-1]  # the namespace checked once
+
+
+def track_key(ns: str, track_id: int) -> str:
+    """fusion.messages.track_key, the namespace's prefix built once."""
+    return _tracks_prefix(ns) + str(int(track_id))
+
+
 def estimate_message(e: Estimate, *, layout: tuple[str, ...], model: str) -> m.Estimate:
+    return _estimate(e, list(layout), model)
+
+
+def _estimate(e: Estimate, names: list[str], model: str) -> m.Estimate:
+    """The wire Estimate; `names` (the layout) is shared by the messages of one encoder."""
+    mu = e.mode_probabilities
     return m.Estimate(
-        track_id=e.track_id, t_ns=e.t_ns, sensor_id=e.sensor_id, seq=max(e.seq, 0), state=e.x.tolist(),
-        cov=e.P.ravel().tolist(), layout=list(layout) if e.x.size else [], model=model,
+        track_id=e.track_id, t_ns=e.t_ns, sensor_id=e.sensor_id, seq=e.seq if e.seq > 0 else 0, state=e.x.tolist(),
+        cov=e.P.ravel().tolist(), layout=names if e.x.size else [], model=model,
         status=e.status,  # type: ignore[arg-type]
-        revision=e.revision, nis=e.nis,
-        mode_probabilities=None if e.mode_probabilities is None else e.mode_probabilities.tolist(),
+        revision=e.revision, nis=e.nis, mode_probabilities=None if mu is None else mu.tolist(),
     )
 
 
@@ -101,8 +145,10 @@ def event_message(ev: TrackEvent) -> m.Event:
 
 
 def estimate_encoder(layout: tuple[str, ...], model: str) -> Callable[[Estimate], bytes]:
+    names = list(layout)
+
     def enc(e: Estimate) -> bytes:
-        return m.encode(estimate_message(e, layout=layout, model=model))
+        return m.encode(_estimate(e, names, model))
 
     return enc
 

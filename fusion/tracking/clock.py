@@ -26,24 +26,21 @@ from collections.abc import Iterable
 
 class SourceClock:
     """clock(a) = a + the (outliers+1)-th largest of the last `samples` offsets t_i - a_i; with
-    fewer offsets than that, the smallest."""
+    fewer offsets than that, the smallest. That offset is kept current (`offset`) as offsets
+    come and go, so reading the clock is one addition."""
 
     def __init__(self, samples: int, outliers: int) -> None:
         self._window: deque[int] = deque(maxlen=samples)
         self._sorted: list[int] = []
         self._rank = outliers + 1
         self.last_arrival_ns: int | None = None
-
-    @property
-    def settled(self) -> bool:
-        """Enough offsets that `outliers` wrong ones cannot decide the clock."""
-        return len(self._sorted) >= self._rank
+        self.offset: int | None = None  # the clock minus the arrival time; None before any data
+        self.settled = False  # enough offsets that `outliers` wrong ones cannot decide the clock
 
     def now(self, arrival_ns: int | None) -> int | None:
         """The clock at an arrival; None before any data."""
-        if not self._sorted:
-            return None
-        return (arrival_ns or 0) + self._sorted[max(len(self._sorted) - self._rank, 0)]
+        o = self.offset
+        return None if o is None else (arrival_ns or 0) + o
 
     def state(self) -> tuple[list[int], int | None]:
         """(offsets, oldest first; last arrival), for a checkpoint."""
@@ -56,6 +53,7 @@ class SourceClock:
             self._window.append(o)
             bisect.insort(self._sorted, o)
         self.last_arrival_ns = last_arrival_ns
+        self._settle()
 
     def observe(self, t_ns: int, arrival_ns: int | None) -> None:
         a = arrival_ns or 0
@@ -64,6 +62,12 @@ class SourceClock:
         self._window.append(t_ns - a)
         bisect.insort(self._sorted, t_ns - a)
         self.last_arrival_ns = arrival_ns
+        self._settle()
+
+    def _settle(self) -> None:
+        k = len(self._sorted)
+        self.settled = k >= self._rank
+        self.offset = self._sorted[max(k - self._rank, 0)] if k else None
 
 
 class Clocks:
@@ -79,7 +83,7 @@ class Clocks:
         own once settled, else the most advanced other source's (None before any data)."""
         own = self.sources[source]
         if own.settled:
-            return own.now(arrival_ns)
+            return (arrival_ns or 0) + own.offset  # type: ignore[operator]
         others = [c.now(arrival_ns) for s, c in self.sources.items() if s != source and c.settled]
         return max((t for t in others if t is not None), default=own.now(arrival_ns))
 
@@ -104,14 +108,16 @@ class Clocks:
                 return None
             newest = max(nows)
             return min(n for n in nows if n >= newest - self.idle_ns)
-        out: int | None = None
+        low: int | None = None  # the smallest offset of the active sources
         for c in self.sources.values():
-            if c.last_arrival_ns is None:
+            last = c.last_arrival_ns
+            if last is None:
                 if self._first_arrival is not None and arrival_ns - self._first_arrival < self.idle_ns:
                     return None  # it may still start: wait for it
                 continue
-            if arrival_ns - c.last_arrival_ns > self.idle_ns:
+            if arrival_ns - last > self.idle_ns:
                 continue  # idle: it does not hold the others back
-            n = c.now(arrival_ns)
-            out = n if out is None or n < out else out  # type: ignore[operator]
-        return out
+            o = c.offset
+            if low is None or o < low:  # type: ignore[operator]
+                low = o
+        return None if low is None else arrival_ns + low

@@ -7,37 +7,32 @@ and its limit is g_m + ln det S: a pair alone is worth taking when cost < limit,
 passes the gate. For an IMM, S and NIS are those of the mixture and ln det S is replaced by
 -2 log L - m ln 2 pi - NIS with L the mixture likelihood.
 
-Two implementations behind one interface, chosen once from a capability:
-- Batched: an EKF over a motion model that broadcasts over stacks (`MotionModel.broadcasts`),
-  or an IMM of such EKFs (fusion.core.imm_stack): each candidate track predicted once, every
-  pair of a scan updated in one compiled call per measurement dimension (the filters' own
-  compiled kernels, looped: fusion.core.compiled_stack);
-- PerPair: one filter predict per track and one update per pair (any filter: UKF, IMM, a
-  model that takes one state at a time).
-They agree to 1e-12 where both apply (tested).
+This module holds what every gate shares (the stacked answers Part, the gathered Taken, the
+kept pairs Gated and their collector Kept, the Gater interface) and the gate for any filter:
+- PerPair: one filter predict per track and one update per pair (any filter: a UKF with
+  custom state arithmetic, filters over models that take one state at a time, control inputs).
+The batched gates and the choice between them live in fusion.tracking.batched_gating; the two
+agree to 1e-12 where both apply (tested).
 """
 
 from __future__ import annotations
 
 import math
-from abc import ABC, abstractmethod
 from dataclasses import dataclass
 from typing import Protocol
 
 import numpy as np
 
 from fusion.core.checks import Array
-from fusion.core.compiled_stack import predict_stack, update_stack
 from fusion.core.gaussian import GaussianState, Update
-from fusion.core.imm import IMM, Filter, IMMState
-from fusion.core.imm_stack import StackPrediction, predict_imm, stackable, update_imm
-from fusion.core.kalman import ExtendedKalmanFilter
+from fusion.core.imm import Filter, IMMState
 from fusion.core.measurement import MeasurementModel
 from fusion.errors import NumericalError
 from fusion.tracking.controls import InputTimeline
 from fusion.tracking.trackset import TrackSet
 
 LOG_2PI = math.log(2.0 * math.pi)
+
 
 
 @dataclass(frozen=True)
@@ -78,11 +73,30 @@ class Taken:
 
 @dataclass(frozen=True)
 class Measured:
-    """The measurements of one scan with their models and noise (R already resolved)."""
+    """The measurements of one scan with their models and noise (R already resolved), and the
+    same stacked once per measurement dimension: measurement j is row at[j] of Z[m], R[m]."""
 
     z: tuple[Array, ...]
     models: tuple[MeasurementModel, ...]
     R: tuple[Array, ...]
+    Z: dict[int, Array]
+    Rs: dict[int, Array]
+    dims: np.ndarray  # (M,) each measurement's dimension
+    at: np.ndarray  # (M,) its row in Z[dims[j]], Rs[dims[j]]
+
+    @classmethod
+    def of(cls, z: tuple[Array, ...], R: tuple[Array, ...], models: tuple[MeasurementModel, ...]) -> Measured:
+        dims = np.array([v.shape[0] for v in z], dtype=np.intp)
+        at = np.zeros(dims.size, dtype=np.intp)
+        Zs: dict[int, Array] = {}
+        Rs: dict[int, Array] = {}
+        for m in np.unique(dims).tolist():
+            rows = np.flatnonzero(dims == m)
+            at[rows] = np.arange(rows.size)
+            rl = rows.tolist()
+            Zs[m] = np.stack([z[j] for j in rl])
+            Rs[m] = np.stack([R[j] for j in rl])
+        return cls(z, models, R, Zs, Rs, dims, at)
 
 
 @dataclass(frozen=True)
@@ -133,23 +147,12 @@ class Gater(Protocol):
         ...
 
 
-def make_gater(filt: Filter, thresholds: dict[int, float], inputs: InputTimeline | None = None) -> Gater:
-    """The batched gate where the filter and its motion models allow it, else pair by pair.
-    (A measurement model that takes one state at a time falls back to pairs within a scan.)
-    Known control inputs add their offset to every prediction (fusion.tracking.controls)."""
-    if isinstance(filt, ExtendedKalmanFilter) and filt.motion.broadcasts:
-        return BatchedGate(filt, thresholds, inputs)
-    if isinstance(filt, IMM) and stackable(filt) and inputs is None:
-        return BatchedIMMGate(filt, thresholds)
-    return PerPairGate(filt, thresholds, inputs)
-
-
-class _Kept:
-    """Collects kept pairs: (track, measurement, NIS, cost, limit) and where each answer lives."""
+class Kept:
+    """Collects kept pairs: (track, measurement, NIS, cost, limit) and where each answer lives,
+    as one block of columns per part."""
 
     def __init__(self) -> None:
-        self.rows: list[tuple[int, int, float, float, float]] = []
-        self.where: list[tuple[int, int]] = []
+        self.blocks: list[tuple[np.ndarray, ...]] = []  # ti, mj, nis, cost, limit, part, row
         self.parts: list[Part] = []
         self.skips = 0
 
@@ -158,26 +161,26 @@ class _Kept:
         """Pairs (ti[k], mj[k]) answered by row k of `part`; the ones inside the gate are kept."""
         cost = -2.0 * ll - dim * LOG_2PI
         self.parts.append(part)
-        g_idx = len(self.parts) - 1
-        for k in np.flatnonzero(nis <= g).tolist():
-            self.rows.append((int(ti[k]), int(mj[k]), float(nis[k]), float(cost[k]), float(cost[k] - nis[k] + g)))
-            self.where.append((g_idx, k))
+        k = np.flatnonzero(nis <= g)
+        c, v = cost[k], np.asarray(nis, dtype=np.float64)[k]
+        self.blocks.append((ti[k], mj[k], v, c, c - v + g, np.full(k.size, len(self.parts) - 1), k))
 
     def add_gated(self, sub: Gated) -> None:
         base = len(self.parts)
         self.parts.extend(sub.parts)
         self.skips += sub.numerical_skips
-        for p in range(sub.ti.size):
-            self.rows.append((int(sub.ti[p]), int(sub.mj[p]), float(sub.nis[p]), float(sub.cost[p]),
-                              float(sub.limit[p])))
-            self.where.append((base + int(sub.where[p, 0]), int(sub.where[p, 1])))
+        self.blocks.append((sub.ti, sub.mj, sub.nis, sub.cost, sub.limit, base + sub.where[:, 0], sub.where[:, 1]))
 
     def done(self) -> Gated:
-        order = sorted(range(len(self.rows)), key=lambda k: (self.rows[k][1], self.rows[k][0]))
-        a = np.array([self.rows[k] for k in order], dtype=np.float64).reshape(len(self.rows), 5)
-        w = np.array([self.where[k] for k in order], dtype=np.intp).reshape(len(self.rows), 2)
-        return Gated(a[:, 0].astype(np.intp), a[:, 1].astype(np.intp), a[:, 2], a[:, 3], a[:, 4], self.parts, w,
-                     self.skips)
+        """The kept pairs sorted by (measurement, track)."""
+        if not self.blocks:
+            e, f = np.zeros(0, dtype=np.intp), np.zeros(0)
+            return Gated(e, e, f, f, f, self.parts, np.zeros((0, 2), dtype=np.intp), self.skips)
+        ti, mj, nis, cost, limit, part, row = (np.concatenate(c) for c in zip(*self.blocks, strict=True))
+        o = np.lexsort((ti, mj))
+        return Gated(ti[o].astype(np.intp), mj[o].astype(np.intp), nis[o].astype(np.float64),
+                     cost[o].astype(np.float64), limit[o].astype(np.float64), self.parts,
+                     np.stack([part[o], row[o]], axis=1).astype(np.intp), self.skips)
 
 
 class PerPairGate:
@@ -203,7 +206,7 @@ class PerPairGate:
 
     def gate(self, ts: TrackSet, t_ns: int, ci: np.ndarray, cj: np.ndarray, meas: Measured) -> Gated:
         preds: dict[int, GaussianState | IMMState] = {}
-        kept = _Kept()
+        kept = Kept()
         for i, j in zip(ci.tolist(), cj.tolist(), strict=True):
             pred = preds.get(i)
             if pred is None:
@@ -224,103 +227,3 @@ class PerPairGate:
                 kept.add_part(np.array([i]), np.array([j]), np.array([up.nis]), np.array([up.log_likelihood]),
                               model.ndim_meas, g, part)
         return kept.done()
-
-
-class _Batched(ABC):
-    """The shared driver of the batched gates: predict each candidate track once, group the
-    candidate pairs by measurement dimension, run the stacked update per group, keep the pairs
-    inside the gate."""
-
-    def __init__(self, filt: Filter, thresholds: dict[int, float], inputs: InputTimeline | None = None) -> None:
-        self.filter = filt
-        self.g = thresholds
-        self.inputs = inputs
-        self._each = PerPairGate(filt, thresholds, inputs)
-
-    @abstractmethod
-    def _predict(self, ts: TrackSet, t_ns: int, tracks: np.ndarray) -> object:
-        """The prediction of tracks (indices into ts) to t_ns, as stacks."""
-
-    @abstractmethod
-    def _update(self, pred: object, rows: np.ndarray, Z: Array, R: Array, model: MeasurementModel
-                ) -> tuple[Array, Part]:
-        """(log-likelihood, the stacked answers) for predicted rows `rows` and measurements Z."""
-
-    def predict(self, ts: TrackSet, t_ns: int, rows: np.ndarray) -> tuple[Array, Array, Array | None]:
-        if rows.size == 0:
-            n = ts.layout.n_state
-            return np.zeros((0, n)), np.zeros((0, n, n)), None
-        pred = self._predict(ts, t_ns, rows)
-        if isinstance(pred, StackPrediction):
-            return pred.x, pred.P, pred.c
-        return pred[0], pred[1], None  # type: ignore[index]
-
-    def gate(self, ts: TrackSet, t_ns: int, ci: np.ndarray, cj: np.ndarray, meas: Measured) -> Gated:
-        kept = _Kept()
-        if ci.size == 0:
-            return kept.done()
-        tracks, row = np.unique(ci, return_inverse=True)  # predict each candidate track once
-        pred = self._predict(ts, t_ns, tracks)
-        dims = np.array([meas.models[j].ndim_meas for j in cj.tolist()])
-        for dim in np.unique(dims).tolist():
-            sel = np.flatnonzero(dims == dim)
-            js = cj[sel]
-            model = meas.models[int(js[0])]  # one model per dimension and sensor: pairs differ by z and R
-            try:
-                if not model.broadcasts:
-                    raise NumericalError("not stackable")
-                ll, part = self._update(pred, row[sel], np.stack([meas.z[j] for j in js.tolist()]),
-                                        np.stack([meas.R[j] for j in js.tolist()]), model)
-            except NumericalError:  # a non-PD S somewhere in the group, or a model that takes one state
-                kept.add_gated(self._each.gate(ts, t_ns, ci[sel], js, meas))
-                continue
-            kept.add_part(ci[sel], js, part.nis, ll, dim, self.g[dim], part)
-        return kept.done()
-
-
-class BatchedGate(_Batched):
-    """Every candidate pair at once: the EKF equations of fusion.core.kalman on stacks."""
-
-    filter: ExtendedKalmanFilter
-
-    def _predict(self, ts: TrackSet, t_ns: int, tracks: np.ndarray) -> tuple[Array, Array]:
-        m = self.filter.motion
-        X, P = ts.X[tracks], ts.P[tracks]
-        dt = (t_ns - ts.t_ns[tracks]) * 1e-9
-        Xp, Pp = predict_stack(X, P, m.jacobian(X, dt), m.Q(X, dt))
-        if not m.is_linear:
-            Xp = m.f(X, dt)
-        if self.inputs is not None:
-            t0 = ts.t_ns[tracks]
-            for t in np.unique(t0).tolist():
-                d = self.inputs.offset(t, t_ns)
-                if d is not None:
-                    Xp[t0 == t] += d
-        return Xp, Pp
-
-    def _update(self, pred: object, rows: np.ndarray, Z: Array, R: Array, model: MeasurementModel
-                ) -> tuple[Array, Part]:
-        Xp, Pp = pred[0][rows], pred[1][rows]  # type: ignore[index]
-        Y = model.residual(Z, model.h(Xp))
-        H = np.broadcast_to(model.jacobian(Xp), (rows.size, Z.shape[1], Xp.shape[1]))
-        ok, Xn, Pn, S, nis, ll = update_stack(Xp, Pp, Y, H, R)
-        if not ok.all():
-            raise NumericalError("an innovation covariance S is not positive definite")
-        return ll, Part(Xn, Pn, Xp, Pp, Y, S, H, nis)
-
-
-class BatchedIMMGate(_Batched):
-    """Every candidate pair at once for an IMM of EKFs (fusion.core.imm_stack)."""
-
-    filter: IMM
-
-    def _predict(self, ts: TrackSet, t_ns: int, tracks: np.ndarray) -> StackPrediction:
-        return predict_imm(self.filter, ts.MX[tracks], ts.MP[tracks], ts.MU[tracks],  # type: ignore[index]
-                           (t_ns - ts.t_ns[tracks]) * 1e-9)
-
-    def _update(self, pred: object, rows: np.ndarray, Z: Array, R: Array, model: MeasurementModel
-                ) -> tuple[Array, Part]:
-        p: StackPrediction = pred  # type: ignore[assignment]
-        sub = StackPrediction(p.xs[rows], p.Ps[rows], p.c[rows], p.x[rows], p.P[rows])
-        u = update_imm(sub, Z, R, model)
-        return u.loglik, Part(u.x, u.P, sub.x, sub.P, u.y, u.S, u.H, u.nis, u.xs, u.Ps, u.mu)

@@ -51,6 +51,7 @@ class Intake:
         self.horizon_ns: int | None = None  # data before it is committed: too late
         self.committed: ScanKey | None = None  # newest scan the history dropped
         self._seen: set[Identity] = set()
+        self._valid_R: dict[tuple[str, int], np.ndarray] = {}  # (sensor, m): the last read-only R found valid
 
     def admit(self, d: Detection) -> tuple[Detection | None, Refusal | None]:
         """The detection to track (its R filled in from the sensor's default when absent), or
@@ -84,7 +85,8 @@ class Intake:
             if ref is None or t_ns <= ref + self.future_ns:
                 clocks.observe(source, t_ns, arrival_ns)
         if ref is not None:
-            self.now_ns = ref if self.now_ns is None else max(self.now_ns, ref)
+            if self.now_ns is None or ref > self.now_ns:
+                self.now_ns = ref
             if t_ns > ref + self.future_ns:
                 return Refusal(source, t_ns, seq, Reason.FUTURE,
                                f"{(t_ns - ref) / 1e9:.3f} s ahead of {source}'s clock")
@@ -128,30 +130,40 @@ class Intake:
         return len(self._seen)
 
     def validate(self, d: Detection) -> tuple[Detection, Refusal | None]:
+        """The detection as the tracker takes it (R filled in), or why it is refused. An R
+        already found valid for this sensor (the same read-only array: fusion.io.wire shares
+        one per distinct std) is not checked again."""
         sm = self.sensors.get(d.sensor_id)
         if sm is None:
             return d, _no(d, Reason.UNKNOWN_SENSOR, f"sensor {d.sensor_id!r} is not configured")
         if not isinstance(d.t_ns, int) or not isinstance(d.seq, int) or d.seq < 0:
             return d, _no(d, Reason.INVALID, "t_ns and seq must be integers, seq >= 0")
         z = d.z
-        if z.ndim != 1 or sm.model(z.shape[0]) is None:
+        if z.ndim != 1 or z.shape[0] not in sm.by_dim:
             return d, _no(d, Reason.INVALID,
                           f"z has shape {z.shape}; sensor {d.sensor_id} takes lengths {sorted(sm.by_dim)}")
-        if not np.isfinite(z).all():
-            return d, _no(d, Reason.INVALID, "z holds NaN or inf")
-        if sm.is_radar and not z[0] > 0:
-            return d, _no(d, Reason.INVALID, f"range must be > 0, got {z[0]}")
-        m = z.shape[0]
-        if d.R is None:
+        zl = z.tolist()
+        for v in zl:
+            if not -math.inf < v < math.inf:
+                return d, _no(d, Reason.INVALID, "z holds NaN or inf")
+        if sm.is_radar and not zl[0] > 0:
+            return d, _no(d, Reason.INVALID, f"range must be > 0, got {zl[0]}")
+        m = len(zl)
+        R = d.R
+        if R is None:
             R = sm.default_R[m]
             if R is None:
                 return d, _no(d, Reason.INVALID, f"no noise: the message carries none and sensor {d.sensor_id} "
                               "has no default in the configuration")
             return Detection(d.sensor_id, d.t_ns, d.seq, z, R, d.arrival_ns, d.epoch), None
-        if _positive_diagonal(d.R, m):
+        if self._valid_R.get((d.sensor_id, m)) is R:
+            return d, None
+        if _positive_diagonal(R, m):
+            if not R.flags.writeable and R.base is None:  # nobody can change it: remember it
+                self._valid_R[(d.sensor_id, m)] = R
             return d, None
         try:
-            R = as_covariance("R", d.R, m)
+            R = as_covariance("R", R, m)
         except InputError as e:
             return d, _no(d, Reason.BAD_COVARIANCE, str(e))
         return Detection(d.sensor_id, d.t_ns, d.seq, z, R, d.arrival_ns, d.epoch), None

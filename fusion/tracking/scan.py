@@ -78,9 +78,9 @@ def run_scan(ts: TrackSet, key: ScanKey, dets: tuple[Detection, ...], ctx: ScanC
     """The scan `key` (see the module docstring); `dets` sorted by seq, R resolved."""
     t_ns, sensor_id = key
     sm = ctx.sensors[sensor_id]
-    meas = Measured(tuple(d.z for d in dets), tuple(sm.by_dim[d.z.shape[0]] for d in dets),
-                    tuple(d.R for d in dets))  # type: ignore[misc]
-    mpos, mvar = _measured_points(sm, dets)
+    meas = Measured.of(tuple(d.z for d in dets), tuple(d.R for d in dets),  # type: ignore[arg-type]
+                       tuple(sm.by_dim[d.z.shape[0]] for d in dets))
+    mpos, mvar = _measured_points(sm, meas)
     tpos, tvar = ts.predicted_position(t_ns, ctx.q2)
     ci, cj = coarse_pairs(tpos, tvar, mpos, mvar, k=ctx.coarse_k)
     gated = ctx.gater.gate(ts, t_ns, ci, cj, meas)
@@ -100,12 +100,14 @@ def run_scan(ts: TrackSet, key: ScanKey, dets: tuple[Detection, ...], ctx: ScanC
                         np.full(ti.size, sm.index, np.int32), seqs, taken.X, taken.P, taken.MX, taken.MP, taken.MU)
     events = [TrackEvent(EventKind.CONFIRMED, int(ts.ids[i]), t_ns) for i in ti[confirm].tolist()]
     tally[Tally.CONFIRMATIONS] += len(events)
-    labels = [Status(int(v)).label for v in status.tolist()]
+    ids, nis = ts.ids.tolist(), gated.nis.tolist()
+    labels = {int(s): s.label for s in Status}
+    MU = [None] * ti.size if taken.MU is None else list(taken.MU)
     estimates = [
-        Estimate(int(ts.ids[i]), t_ns, sensor_id, int(seqs[k]), taken.X[k], taken.P[k], labels[k], 0,
-                 float(gated.nis[p]), taken.y[k], taken.S[k], None if taken.MU is None else taken.MU[k],
-                 mpos[j], taken.prior_x[k], taken.prior_P[k], taken.H[k])
-        for k, (p, i, j) in enumerate(zip(pairs, ti.tolist(), mj.tolist(), strict=True))
+        Estimate(ids[i], t_ns, sensor_id, seq, x, P, labels[st], 0, nis[p], y, S, mu, mpos[j], px, pP, H)
+        for p, i, j, seq, st, x, P, y, S, mu, px, pP, H in zip(
+            pairs, ti.tolist(), mj.tolist(), seqs.tolist(), status.tolist(), list(taken.X), list(taken.P), taken.y,
+            taken.S, MU, taken.prior_x, taken.prior_P, taken.H, strict=True)
     ]
 
     assoc, born, born_j = _births_and_associations(ts, key, dets, gated, dict(zip(mj.tolist(), pairs, strict=True)),
@@ -140,20 +142,20 @@ def _births_and_associations(ts: TrackSet, key: ScanKey, dets: tuple[Detection, 
     """What became of each measurement; a measurement in no gate starts a track (up to
     max_tracks), born with single-point initiation."""
     t_ns, sensor_id = key
+    ids, gti, nis = ts.ids.tolist(), gated.ti.tolist(), gated.nis.tolist()
     gated_by: dict[int, list[int]] = {}
-    for i, j in zip(gated.ti.tolist(), gated.mj.tolist(), strict=True):
-        gated_by.setdefault(j, []).append(int(ts.ids[i]))
+    for i, j in zip(gti, gated.mj.tolist(), strict=True):
+        gated_by.setdefault(j, []).append(ids[i])
     assoc: list[Association] = []
     births: list[int] = []
     room = ctx.max_tracks - len(ts)
     for j, d in enumerate(dets):
-        near = tuple(gated_by.get(j, ()))
+        near = gated_by.get(j)
         p = taken.get(j)
         if p is not None:
-            assoc.append(Association(sensor_id, t_ns, d.seq, Outcome.UPDATED, int(ts.ids[gated.ti[p]]),
-                                     float(gated.nis[p]), near))
+            assoc.append(Association(sensor_id, t_ns, d.seq, Outcome.UPDATED, ids[gti[p]], nis[p], tuple(near)))
         elif near:
-            assoc.append(Association(sensor_id, t_ns, d.seq, Outcome.UNASSIGNED, None, None, near))
+            assoc.append(Association(sensor_id, t_ns, d.seq, Outcome.UNASSIGNED, None, None, tuple(near)))
             tally[Tally.UNASSIGNED] += 1
         elif len(births) >= room:
             assoc.append(Association(sensor_id, t_ns, d.seq, Outcome.CAPACITY, None, None, ()))
@@ -173,28 +175,27 @@ def _assign_confirmed_first(g: Gated, ts: TrackSet, n_meas: int) -> list[int]:
     conf = ts.status[g.ti] == Status.CONFIRMED
     out: list[int] = []
     taken = np.zeros(n_meas, dtype=bool)
+    ti, mj = g.ti.tolist(), g.mj.tolist()
     for stage in (conf, ~conf):
         sel = np.flatnonzero(stage & ~taken[g.mj])
         if sel.size == 0:
             continue
         chosen = gnn_assign(g.ti[sel], g.mj[sel], g.cost[sel], g.limit[sel], n_tracks=len(ts), n_meas=n_meas)
-        index = {(int(g.ti[p]), int(g.mj[p])): int(p) for p in sel.tolist()}
+        index = {(ti[p], mj[p]): p for p in sel.tolist()}
         for i, j in chosen:
             out.append(index[(i, j)])
             taken[j] = True
-    return sorted(out, key=lambda p: (int(g.mj[p]), int(g.ti[p])))
+    return sorted(out, key=lambda p: (mj[p], ti[p]))
 
 
-def _measured_points(sm: SensorModel, dets: tuple[Detection, ...]) -> tuple[Array, Array]:
+def _measured_points(sm: SensorModel, meas: Measured) -> tuple[Array, Array]:
     """World points of the scan's measurements and per-axis variances, one call per dimension."""
-    mpos = np.empty((len(dets), sm.ndim))
-    mvar = np.empty((len(dets), sm.ndim))
-    dims = [d.z.shape[0] for d in dets]
-    for m in sorted(set(dims)):
-        rows = [j for j, k in enumerate(dims) if k == m]
-        Z = np.stack([dets[j].z for j in rows])
-        R = np.stack([dets[j].R for j in rows])  # type: ignore[misc]
-        mpos[rows], mvar[rows] = sm.positions(Z, R)
+    M = meas.dims.size
+    mpos = np.empty((M, sm.ndim))
+    mvar = np.empty((M, sm.ndim))
+    for m, Z in meas.Z.items():
+        rows = np.flatnonzero(meas.dims == m)
+        mpos[rows], mvar[rows] = sm.positions(Z, meas.Rs[m])
     return mpos, mvar
 
 

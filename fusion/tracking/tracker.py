@@ -26,7 +26,7 @@ from fusion.errors import ConfigError
 from fusion.tracking.checkpoint import TrackerState, restore, state_of
 from fusion.tracking.controls import InputTimeline
 from fusion.tracking.detection import ControlInput, Detection, Reason, Refusal
-from fusion.tracking.gating import make_gater
+from fusion.tracking.batched_gating import make_gater
 from fusion.tracking.history import Entry, History, Rewind, revise, revise_events
 from fusion.tracking.intake import Intake
 from fusion.tracking.lifecycle import Lifecycle
@@ -196,19 +196,21 @@ class Tracker:
         accepted: list[Detection] = []
         inputs: list[ControlInput] = []
         refused: list[Refusal] = []
+        admit, received = self.intake.admit, 0
         for d in items:
-            self.intake_counts["received"] += 1
+            received += 1
             if isinstance(d, ControlInput):
                 c, bad = self.intake.admit_input(d)
                 if c is not None:
                     inputs.append(c)
             else:
-                ok, bad = self.intake.admit(d)
+                ok, bad = admit(d)
                 if ok is not None:
                     accepted.append(ok)
             if bad is not None:
                 refused.append(bad)
                 self.refused_counts[bad.reason] = self.refused_counts.get(bad.reason, 0) + 1
+        self.intake_counts["received"] += received
         self.intake_counts["applied"] += len(accepted)
         self.intake_counts["inputs"] += len(inputs)
         return accepted, inputs, refused

@@ -1,5 +1,5 @@
 """The batched and per-pair gates agree to 1e-12 on every model both serve (CV, CA, CT, IMMs of
-them), inside the tracker."""
+them, UKFs over CV and CT), inside the tracker."""
 
 from __future__ import annotations
 
@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from fusion.config import ModeConfig, MotionConfig, TrackerConfig
-from fusion.tracking.gating import BatchedGate, BatchedIMMGate, PerPairGate
+from fusion.tracking.batched_gating import BatchedGate, BatchedIMMGate, BatchedUKFGate
+from fusion.tracking.gating import PerPairGate
 from fusion.tracking.tracker import Tracker
 from tests.tracking.streams import Sensor, constant_velocity, detect, in_order, scans
 
@@ -26,9 +27,11 @@ MODELS = {
     "imm-cv-cv": MotionConfig(model="imm", modes=[
         ModeConfig(model="cv", accel_psd_m2s3=0.1, sojourn_s=20.0),
         ModeConfig(model="cv", accel_psd_m2s3=10.0, sojourn_s=2.0)]),
+    "ukf-cv": MotionConfig(model="cv", accel_psd_m2s3=0.5, filter="ukf"),
+    "ukf-ct": MotionConfig(model="ct", accel_psd_m2s3=0.5, turn_psd_rad2s3=0.01, filter="ukf"),
 }
 BATCHED = {"cv": BatchedGate, "ca": BatchedGate, "ct": BatchedGate, "imm-cv-ct": BatchedIMMGate,
-           "imm-cv-cv": BatchedIMMGate}
+           "imm-cv-cv": BatchedIMMGate, "ukf-cv": BatchedUKFGate, "ukf-ct": BatchedUKFGate}
 
 
 def run(motion: MotionConfig, gate: type, seed: int) -> list:
