@@ -57,8 +57,9 @@ def add(sub: Any, common: argparse.ArgumentParser) -> None:
 
     ip = sub.add_parser("inspect", parents=[common], help="summarise a recording (.rrd) headlessly",
                         description=INSPECT_DESCRIPTION, epilog=INSPECT_EXAMPLES, formatter_class=a.Formatter)
-    ip.add_argument("file", type=Path, metavar="FILE",
-                    help="a recording (.rrd) written by fusion serve, demo or replay")
+    ip.add_argument("file", type=str, metavar="FILE", nargs="+",
+                    help="recordings (.rrd) written by fusion serve, demo or replay: files, a folder or a glob "
+                         "(a rotated set is merged in time order)")
     ip.add_argument("--json", action="store_true", help="print JSON for scripts instead of text")
     ip.set_defaults(func=inspect)
 
@@ -113,13 +114,18 @@ def replay(args: argparse.Namespace) -> int:
 
 
 def inspect(args: argparse.Namespace) -> int:
-    path = a.input_file(args.file, "recording", "fusion demo writes recordings/<scenario>.rrd")
-    _check_kind(path, RRD_MAGIC)
-    from fusion.io.inspect import format_summary, summarise
+    from fusion.io.inspect import expand, format_summary, summarise
 
+    paths = expand(args.file)
+    if not paths:
+        raise CliError(Exit.FILE, f"{' '.join(args.file)}: no recordings found; fusion demo writes "
+                                  "recordings/<scenario>.rrd")
+    for p in paths:
+        a.input_file(p, "recording", "fusion demo writes recordings/<scenario>.rrd")
+        _check_kind(p, RRD_MAGIC)
     try:
-        s = summarise(path)
+        s = summarise(paths)
     except RuntimeError as e:
-        raise CliError(Exit.FILE, f"{path}: cannot read this recording: {e}") from None
+        raise CliError(Exit.FILE, f"{' '.join(map(str, paths))}: cannot read this recording: {e}") from None
     print(s.to_json() if args.json else format_summary(s))
     return 0
