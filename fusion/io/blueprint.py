@@ -73,9 +73,9 @@ def build(*, ndim: int, axes: Sequence[str], viewed: Sequence[str], written: set
         eye = None
         if ndim == 2:  # top-down: y up on the screen, looking along -z
             cx, cy = float(centre[0]), float(centre[1])
-            eye = rrb.EyeControls3D(kind=rrb.Eye3DKind.Orbital, position=(cx, cy, 1.6 * extent_m + 1.0),
+            eye = rrb.EyeControls3D(kind=rrb.Eye3DKind.Orbital, position=(cx, cy, 3.0 * extent_m + 1.0),
                                     look_target=(cx, cy, 0.0), eye_up=(0.0, 1.0, 0.0))
-        cursor_only = [f"- /world/tracks/{lab}/cov" for lab in viewed]
+        cursor_only = [f"- /world/tracks/{lab}/{part}" for lab in viewed for part in ("cov", "now")]
         left.append(rrb.Spatial3DView(origin="world", contents=["$origin/**", *cursor_only],
                                       name="trajectories up to the cursor", time_ranges=history, eye_controls=eye,
                                       line_grid=rrb.LineGrid3D(visible=ndim == 3)))

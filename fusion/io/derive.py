@@ -20,6 +20,7 @@ from __future__ import annotations
 from functools import cache
 
 import numpy as np
+from scipy.spatial import cKDTree
 from scipy.stats import chi2
 
 from fusion.core.checks import Array
@@ -105,8 +106,10 @@ def match_truth(t_ns: Array, X: Array, P: Array, truth: dict[int, dict[str, Arra
         C = np.stack([T[k] for k in ids])
         if C.shape[1] != X.shape[1]:
             continue
-        D = np.sum((X[rows][:, None, pi] - C[None, :, pi]) ** 2, axis=2)
-        best = np.argmin(D, axis=1)
+        if len(ids) > 16:  # nearest true target by a k-d tree: O(k log j), not the k x j distances
+            best = cKDTree(C[:, pi]).query(X[rows][:, pi])[1]
+        else:
+            best = np.argmin(np.sum((X[rows][:, None, pi] - C[None, :, pi]) ** 2, axis=2), axis=1)
         dp = X[rows][:, pi] - C[best][:, pi]
         Pp = P[rows][:, pi][:, :, pi]
         d2 = np.einsum("ij,ij->i", dp, np.linalg.solve(Pp, dp[..., None])[..., 0])

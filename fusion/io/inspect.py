@@ -78,7 +78,9 @@ class Summary:
     events: dict[str, int]
     meta: dict[str, object] = field(default_factory=dict)
     files: list[str] = field(default_factory=list)
-    ospa_m: float | None = None  # mean OSPA against truth
+    # mean OSPA / GOSPA of the recording's metrics series: computed when logged, from the revisions
+    # known then, so (unlike every other figure here) they can differ between identical runs with replays
+    ospa_m: float | None = None
     gospa_m: float | None = None
 
     def to_json(self) -> str:
@@ -265,7 +267,8 @@ def format_summary(s: Summary) -> str:
     if s.position_rmse is not None:
         lines.append(f"position RMSE against truth: {s.position_rmse:.4f} m")
     if s.ospa_m is not None:
-        lines.append(f"OSPA against truth: mean {s.ospa_m:.3f} m, GOSPA mean {s.gospa_m:.3f} m (order 2, cut-off 10 m)")
+        lines.append(f"OSPA against truth: mean {s.ospa_m:.3f} m, GOSPA mean {s.gospa_m:.3f} m (order 2, cut-off 10 m, "
+                     "as logged: before later revisions)")
     for name, c in (("NIS", s.nis), ("NEES", s.nees)):
         if c.mean is None:
             lines.append(f"{name}: no data")

@@ -9,10 +9,13 @@ id alone), and with 1000 live tracks two share a label with probability about 10
 
 from __future__ import annotations
 
+from functools import lru_cache
+
 _CROCKFORD = "0123456789abcdefghjkmnpqrstvwxyz"
 EPOCH_NS = 10**17  # sensor times from about 1973 on are epoch times; below are stream-relative
 
 
+@lru_cache(maxsize=65536)
 def short_id(track_id: int) -> str:
     """Six base-32 characters of the id's top 30 bits (of 63): 'k3x9qa'."""
     v = (int(track_id) >> 33) & ((1 << 30) - 1)

@@ -47,7 +47,9 @@ from fusion.io.palette import colour
 from fusion.tracking.results import Estimate, Outcome, StepResult
 
 MAX_VIEWED = 6  # tracks with views of their own: the first confirmed ones
-_USED = (Outcome.UPDATED, Outcome.BORN)
+_USED = (Outcome.UPDATED,)  # a measurement that started a track is not drawn as associated
+_RGBA_USED = np.array(colour("associated"), dtype=np.uint8)
+_RGBA_CLUTTER = np.array(colour("clutter"), dtype=np.uint8)
 
 
 class RerunSink:
@@ -141,9 +143,8 @@ class RerunSink:
         for m in result.measurements:
             scans.setdefault((m.sensor_id, m.t_ns), []).append(m)
         for (sensor_id, t_ns), ms in sorted(scans.items()):
-            used = [outcome.get((m.sensor_id, m.seq)) for m in ms]
-            rgba = np.array([colour("associated") if a is not None and a.outcome in _USED else colour("clutter")
-                             for a in used], dtype=np.uint8)
+            used = np.array([(a := outcome.get((m.sensor_id, m.seq))) is not None and a.outcome in _USED for m in ms])
+            rgba = np.where(used[:, None], _RGBA_USED, _RGBA_CLUTTER).astype(np.uint8)
             arr = t_ns if arrival_ns is None else arrival_ns
             self.col(f"world/meas/{sensor_id}", "points", radius=-2.5).add(
                 t_ns, step, arr, p=world(np.stack([m.position for m in ms])), rgba=rgba)
@@ -215,9 +216,9 @@ class RerunSink:
         rr = self._rr
         kw = {"names": list(c.style["names"]), "colors": [list(x) for x in c.style["colors"]]}
         if c.style.get("points"):
-            self.rec.log(entity, rr.SeriesPoints(marker_sizes=[3.0] * len(kw["names"]), **kw), static=True)
+            self.rec.log(entity, rr.SeriesPoints(marker_sizes=[1.5] * len(kw["names"]), **kw), static=True)
         else:
-            self.rec.log(entity, rr.SeriesLines(widths=list(c.style.get("widths", [1.5] * len(kw["names"]))), **kw),
+            self.rec.log(entity, rr.SeriesLines(widths=list(c.style.get("widths", [2.0] * len(kw["names"]))), **kw),
                          static=True)
 
     def _send_blueprint(self) -> None:

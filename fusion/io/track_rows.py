@@ -17,6 +17,7 @@ from fusion.io.palette import colour, series_colours
 from fusion.tracking.results import Estimate
 
 OSPA_EVERY_NS = 1_000_000_000  # OSPA / GOSPA at most once per second of sensor time
+OSPA_MAX_POINTS = 300  # and for scenes of at most this many tracks and targets (the assignment is cubic)
 TRUTH_KEPT = 100_000  # truth times kept for scoring (the oldest half dropped past this)
 
 
@@ -126,7 +127,7 @@ class Rows:
                        ids: list[int]) -> None:
         """OSPA and GOSPA at the first scan time with truth in each OSPA_EVERY_NS."""
         for tt in sorted(set(t[conf].tolist())):
-            if tt < self._next_ospa or not self.truth.get(tt):
+            if tt < self._next_ospa or not self.truth.get(tt) or len(self.truth[tt]) > OSPA_MAX_POINTS:
                 continue
             self._next_ospa = tt + OSPA_EVERY_NS
             at = np.flatnonzero(conf & (t == tt))
