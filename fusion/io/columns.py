@@ -25,7 +25,7 @@ from fusion.core.checks import Array
 class Column:
     """Rows of one entity: times, and per field a list (one item per row, or a whole block)."""
 
-    __slots__ = ("arrival_ns", "data", "kind", "step", "style", "t_ns")
+    __slots__ = ("arrival_ns", "blocks", "data", "kind", "step", "style", "t_ns")
 
     def __init__(self, kind: str, **style: Any) -> None:
         self.kind = kind
@@ -34,6 +34,7 @@ class Column:
         self.step: list[int] = []
         self.arrival_ns: list[int] = []
         self.data: dict[str, list[Any]] = defaultdict(list)
+        self.blocks: dict[str, list[Array]] = defaultdict(list)  # record fields as (rows, width) blocks
 
     def __len__(self) -> int:
         return len(self.t_ns)
@@ -45,8 +46,12 @@ class Column:
         for k, v in fields.items():
             self.data[k].append(v)
 
-    def extend(self, t_ns: Array, step: Array, arrival_ns: Array, **fields: Any) -> None:
-        """Many rows at once: times as arrays, each field a sequence with one item per row."""
+    def extend(self, t_ns: Array, step: Array, arrival_ns: Array, blocks: dict[str, Array] | None = None,
+               **fields: Any) -> None:
+        """Many rows at once: times as arrays, each field a sequence with one item per row, and
+        `blocks`: vector fields as (rows, width) arrays (a record's x, std, error)."""
+        for k, b in (blocks or {}).items():
+            self.blocks[k].append(np.asarray(b, dtype=np.float64))
         self.t_ns.extend(np.asarray(t_ns).tolist())
         self.step.extend(np.asarray(step).tolist())
         self.arrival_ns.extend(np.asarray(arrival_ns).tolist())
@@ -114,7 +119,9 @@ def components(rr: Any, c: Column) -> Any:
     if c.kind == "text":
         return rr.TextLog.columns(text=d["text"], level=d["level"])
     if c.kind == "record":  # structured rows: one AnyValues component per field
-        return rr.AnyValues.columns(**{k: _field(v) for k, v in d.items()})
+        fields = {k: _field(v) for k, v in d.items()}
+        fields.update({k: _block(v) for k, v in c.blocks.items()})
+        return rr.AnyValues.columns(**fields)
     raise AssertionError(f"unknown column kind {c.kind!r}")  # every kind is produced by the sink
 
 
@@ -127,3 +134,11 @@ def _field(values: list[Any]) -> Any:
         flat = np.concatenate([v.ravel() for v in values]) if offsets[-1] else np.empty(0)
         return pa.ListArray.from_arrays(pa.array(offsets), pa.array(flat, pa.float64()))
     return pa.array(values)
+
+
+def _block(blocks: list[Array]) -> Any:
+    """(rows, width) blocks as one list<float64> array: a vector per row, no per-row work."""
+    flat = np.concatenate(blocks)
+    n, width = flat.shape
+    offsets = np.arange(0, n * width + 1, width, dtype=np.int32)
+    return pa.ListArray.from_arrays(pa.array(offsets), pa.array(flat.ravel(), pa.float64()))

@@ -113,11 +113,10 @@ def match_truth(t_ns: Array, X: Array, P: Array, truth: dict[int, dict[str, Arra
         dp = X[rows][:, pi] - C[best][:, pi]
         Pp = P[rows][:, pi][:, :, pi]
         d2 = np.einsum("ij,ij->i", dp, np.linalg.solve(Pp, dp[..., None])[..., 0])
-        for r, b, ok in zip(rows.tolist(), best.tolist(), (d2 < MATCH_D2).tolist(), strict=True):
-            if ok:
-                idx.append(r)
-                states.append(C[b])
-                names.append(ids[b])
+        ok = d2 < MATCH_D2
+        idx.extend(rows[ok].tolist())
+        states.extend(C[best[ok]])
+        names.extend(ids[b] for b in best[ok].tolist())
     o = np.argsort(idx, kind="stable")
     return (np.asarray(idx, dtype=np.int64)[o], np.stack(states)[o] if states else np.empty((0, X.shape[1])),
             [names[k] for k in o])

@@ -11,13 +11,15 @@ it: identical runs give identical figures whatever the replays did. A track coun
 when one of its estimates is.
 
 Consistency verdicts (NIS over the measurement dimension m_k of each update; NEES over the
-kinematic components n, see fusion.io.derive): the ratio R = sum(values) / sum(dofs) is 1 for a
-consistent filter. Estimation errors are correlated in time, so the samples are not independent;
-the verdict uses batch means: each track's samples in time order, tracks one after another, cut
-into B = 20 consecutive batches (B = K // 10 with fewer than 200 samples, at least 5), each
-batch's ratio taken as an independent draw; R is "consistent" when |R - 1| <= t(0.975, B-1) s / sqrt(B)
-(s: spread of the batch ratios). With fewer than 50 samples the samples are taken as independent
-and sum(values) is tested against chi2(sum(dofs)). The verdict says which it assumed.
+kinematic components n, see fusion.io.derive): for K independent samples sum(values) ~
+chi2(sum(dofs)). Estimation errors are correlated in time (NEES above all: a slowly forgetting
+filter carries its initial error for the whole run), so the samples are not independent: the
+verdict estimates the integrated autocorrelation time tau of the samples (each track's in time
+order; Geyer's initial positive sequence; about the sample mean, corrected for that estimator's
+low bias in runs of L samples, E[tau_hat] ~ tau (1 - tau / L)) and tests the mean against the interval of K / tau
+effectively independent samples: chi2.ppf((0.025, 0.975), sum(dofs) / tau) / (K / tau). White
+samples (NIS of a consistent filter) give tau ~ 1, the plain chi-square test. Several files of
+independent runs give more effectively independent samples. The verdict says what it assumed.
 """
 
 from __future__ import annotations
@@ -30,11 +32,10 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
-from scipy.stats import chi2, t as student_t
+from scipy.stats import chi2
 
 from fusion.io.rrd_read import FOOTER, read_chunks
 
-BATCHES = 20
 
 
 @dataclass
@@ -101,26 +102,59 @@ def expand(inputs: list[str | Path]) -> list[Path]:
     return sorted(out)
 
 
-def _verdict(values: np.ndarray, dofs: np.ndarray) -> Consistency:
-    """See the module docstring. values, dofs: per sample, each track's in time order."""
+def autocorrelation_time(seqs: list[np.ndarray], mean: float) -> float:
+    """Integrated autocorrelation time tau = 1 + 2 sum_k rho_k of samples pooled over sequences
+    (each track's samples in time order), rho from the pooled autocovariance about `mean` (the
+    value under test: the sample mean would hide an error that persists for the whole run), by
+    FFT, the sum cut by Geyer's initial positive sequence (pairs rho_2m + rho_2m+1 summed while
+    positive). At least 1."""
+    seqs = [q for q in seqs if q.size > 1]
+    if not seqs:
+        return 1.0
+    mu = mean
+    n_max = max(q.size for q in seqs)
+    acov = np.zeros(n_max)
+    pairs = np.zeros(n_max)
+    for q in seqs:
+        x = q - mu
+        f = np.fft.rfft(x, 2 * q.size)
+        acov[: q.size] += np.fft.irfft(f * np.conj(f))[: q.size]
+        pairs[: q.size] += np.arange(q.size, 0, -1)
+    if acov[0] <= 0:
+        return 1.0
+    rho = (acov / pairs) / (acov[0] / pairs[0])
+    tau = -1.0
+    for m in range(n_max // 2):
+        g = rho[2 * m] + rho[2 * m + 1]
+        if g <= 0:
+            break
+        tau += 2.0 * g
+    return max(tau, 1.0)
+
+
+def verdict(values: np.ndarray, dofs: np.ndarray, seqs: list[np.ndarray] | None = None) -> Consistency:
+    """See the module docstring. values, dofs: per sample; seqs: the values per track in time order
+    (for the autocorrelation; one sequence of all values when not given)."""
     k = int(values.size)
     if k == 0:
         return Consistency(0, 0, None, None, "no data", "")
     total, dof = float(values.sum()), int(dofs.sum())
-    dbar = dof / k
-    if k < 50:
-        lo, hi = chi2.ppf(0.025, dof), chi2.ppf(0.975, dof)
-        verdict = "consistent" if lo <= total <= hi else ("too high" if total > hi else "too low")
-        return Consistency(k, dof, total / k, (float(lo / k), float(hi / k)), verdict,
-                           "samples independent: sum ~ chi2(sum of dofs)")
-    b = BATCHES if k >= 10 * BATCHES else max(5, k // 10)
-    edges = np.linspace(0, k, b + 1).astype(int)
-    ratios = np.array([values[a:z].sum() / dofs[a:z].sum() for a, z in zip(edges[:-1], edges[1:], strict=True)])
-    r = total / dof
-    h = float(student_t.ppf(0.975, b - 1) * ratios.std(ddof=1) / np.sqrt(b))
-    verdict = "consistent" if abs(r - 1.0) <= h else ("too high" if r > 1.0 else "too low")
-    return Consistency(k, dof, total / k, ((1 - h) * dbar, (1 + h) * dbar), verdict,
-                       f"batch means: {b} batches of consecutive samples independent (Student t, {b - 1} dof)")
+    dbar = dof / k  # the nominal mean of a sample
+    seqs_ = seqs if seqs is not None else [values]
+    tau_hat = autocorrelation_time(seqs_, float(values.mean()))
+    # about the sample mean, the estimate is biased low: E[tau_hat] ~ tau (1 - tau / L) for
+    # sequences of L samples; solved for tau (capped at L / 2)
+    L = float(np.mean([q.size for q in seqs_ if q.size > 1] or [k]))
+    tau = L / 2 * (1 - np.sqrt(1 - 4 * tau_hat / L)) if tau_hat < L / 4 else L / 2
+    tau = max(float(tau), 1.0)
+    k_eff = k / tau
+    nu = dof / tau  # chi-square degrees of freedom of the k_eff effectively independent samples
+    lo, hi = chi2.ppf(0.025, nu) / k_eff, chi2.ppf(0.975, nu) / k_eff
+    mean = total / k
+    verdict_ = "consistent" if lo <= mean <= hi else ("too high" if mean > hi else "too low")
+    return Consistency(k, dof, mean, (float(lo), float(hi)), verdict_,
+                       f"time-correlated samples: autocorrelation time {tau:.1f} samples, so {k_eff:.0f} "
+                       f"effectively independent ones; sum ~ chi2(sum of dofs / {tau:.1f}) scaled")
 
 
 class _Reader:
@@ -197,7 +231,7 @@ def summarise(path: str | Path | list[str | Path]) -> Summary:
         duration_s=0.0 if t0 is None or t1 is None else (t1 - t0) / 1e9, sensors=dict(sorted(rd.sensors.items())),
         tracks=tracks, tentative_only=tentative,
         position_rmse=float(np.sqrt(allsq.mean())) if allsq.size else None,
-        nis=_verdict(*nis), nees=_verdict(*nees), counts={k: v for k, (_, v) in sorted(rd.counts.items())},
+        nis=verdict(*nis), nees=verdict(*nees), counts={k: v for k, (_, v) in sorted(rd.counts.items())},
         events=dict(sorted(rd.events.items())), meta=rd.meta, files=[str(p) for p in files],
         ospa_m=mean(rd.metrics.get("ospa")), gospa_m=mean(rd.metrics.get("gospa")),
     )
@@ -216,6 +250,7 @@ def _tracks(est: dict[str, list], pos_idx: list[int]) -> tuple:
         by_track[tid].append(i)
     tracks, all_sq = [], []
     nis_v, nis_d, nees_v, nees_d = [], [], [], []
+    nis_s, nees_s = [], []  # per track, in time order: for the autocorrelation
     tentative = 0
     for tid in sorted(by_track, key=lambda x: est["label"][by_track[x][0]]):
         idx = by_track[tid]
@@ -223,7 +258,7 @@ def _tracks(est: dict[str, list], pos_idx: list[int]) -> tuple:
         if not conf:
             tentative += 1
             continue
-        errs = [est["error"][i] for i in conf if est["error"][i]]
+        errs = [est["error"][i] for i in conf if est["nees_dof"][i]]  # scored against truth
         sq = np.sum(np.asarray(errs)[:, pos_idx] ** 2, axis=1) if errs and pos_idx else None
         if sq is not None:
             all_sq.append(sq)
@@ -233,13 +268,15 @@ def _tracks(est: dict[str, list], pos_idx: list[int]) -> tuple:
         nis_d += [est["nis_dof"][i] for i in ni]
         nees_v += [est["nees"][i] for i in ne]
         nees_d += [est["nees_dof"][i] for i in ne]
+        nis_s.append(np.array([est["nis"][i] for i in ni]))
+        nees_s.append(np.array([est["nees"][i] for i in ne]))
         ts = [est["t"][i] for i in conf]
         tracks.append(TrackSummary(
             est["label"][conf[0]], min(ts), max(ts), len(conf), None if sq is None else float(np.sqrt(sq.mean())),
             float(np.mean([est["nis"][i] for i in ni])) if ni else None,
             float(np.mean([est["nees"][i] for i in ne])) if ne else None, int(tid)))
     arr = lambda v: np.asarray(v, dtype=np.float64)  # noqa: E731
-    return tracks, all_sq, (arr(nis_v), arr(nis_d)), (arr(nees_v), arr(nees_d)), tentative
+    return tracks, all_sq, (arr(nis_v), arr(nis_d), nis_s), (arr(nees_v), arr(nees_d), nees_s), tentative
 
 
 def _table(tracks: list[TrackSummary]) -> list[str]:

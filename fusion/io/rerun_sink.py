@@ -2,16 +2,18 @@
 number of tracks.
 
 Rerun costs ~150-300 us per `send_columns` call here, whatever its size, so rows are buffered and
-written with one call per entity every `flush_interval_s` (checked on each step), at
-`flush_rows` pending rows, and at `close()`; and the number of entities per flush is bounded:
-the data of record are a few all-track entities (one row per estimate, association or event), and
-only the first MAX_VIEWED confirmed tracks get entities of their own for their time series.
+written with one call per entity, and the number of entities is bounded: the data of record are
+a few all-track entities (one row per estimate, association or event), written every
+`flush_interval_s` (checked on each step), at `flush_rows` pending rows and at `flush()`/`close()`;
+only the first MAX_VIEWED confirmed tracks get entities of their own (their time series and
+cursor marks, ~15 each), and those are written every `view_interval_s` (and at `flush()`/`close()`):
+a killed writer loses at most that much of them, never any of the record.
 
 Entity layout (positions in metres, world frame, 3-D points: 1-D tracks on the x axis, 2-D in the
 z = 0 plane; track labels are fusion.io.labels.short_id of the id):
   record/estimates       every estimate and retraction: track, label, sensor, seq, status, revision,
                          x, std = sqrt(diag P), nis, nis_dof, nees, nees_dof, error, target (what
-                         `fusion inspect` reads; NaN / empty where a value does not apply)
+                         `fusion inspect` reads; NaN where a value does not apply)
   record/associations    every accepted measurement: sensor, seq, outcome, track label, gated labels, nis
   record/events          births, confirmations, coasting, deletions (with reason), withdrawals,
                          replays and refusals: kind, track, label, reason, retracted, detail
@@ -46,7 +48,7 @@ from fusion.io.labels import is_epoch, short_id
 from fusion.io.palette import colour
 from fusion.tracking.results import Estimate, Outcome, StepResult
 
-MAX_VIEWED = 6  # tracks with views of their own: the first confirmed ones
+_VIEW_ENTITIES = ("tracks/", "world/tracks/")
 _USED = (Outcome.UPDATED,)  # a measurement that started a track is not drawn as associated
 _RGBA_USED = np.array(colour("associated"), dtype=np.uint8)
 _RGBA_CLUTTER = np.array(colour("clutter"), dtype=np.uint8)
@@ -58,8 +60,8 @@ class RerunSink:
     def __init__(
         self, path: str | Path, *, layout: tuple[str, ...], position_indices: tuple[int, ...],
         velocity_indices: tuple[int, ...], recording_id: str = "fusion", application_id: str = "fusion",
-        flush_rows: int = 200_000, flush_interval_s: float = 0.5, meta: Mapping[str, Any] | None = None,
-        counts: Callable[[], Mapping[str, int]] | None = None,
+        flush_rows: int = 200_000, flush_interval_s: float = 0.5, view_interval_s: float = 5.0,
+        meta: Mapping[str, Any] | None = None, counts: Callable[[], Mapping[str, int]] | None = None,
     ) -> None:
         import rerun as rr
 
@@ -72,11 +74,13 @@ class RerunSink:
         self.ndim = len(position_indices)
         self._cols: dict[str, Column] = {}
         self._est: list[tuple[Estimate, int, int]] = []
+        self._truth_rows: list[tuple[int, int, Array]] = []
         self._pending = 0
         self.rows_written = 0
         self._flush_rows = flush_rows
         self._interval = flush_interval_s
-        self._last_flush = time.monotonic()
+        self._last_flush = self._last_view_flush = time.monotonic()
+        self._view_interval = view_interval_s
         self._step = 0
         self._counts = counts
         self._newest_t = 0
@@ -115,10 +119,10 @@ class RerunSink:
         return c
 
     def log_truth(self, target_id: str, t_ns: int, state: Array) -> None:
-        """A true state in the tracker's layout; kept to score estimates at the same t_ns."""
+        """A true state in the tracker's layout; kept to score estimates at the same t_ns (the
+        world/truth rows are built at flush, in one block)."""
         s = self.rows.add_truth(target_id, t_ns, state)
-        self.col("world/truth", "points", rgba=colour("truth"), radius=-1.5).add(
-            t_ns, self._step, t_ns, p=world(s[self.rows.pi])[None, :])
+        self._truth_rows.append((t_ns, self._step, s))
         self._pending += 1
 
     def log_text(self, t_ns: int, text: str, level: str = "INFO") -> None:
@@ -149,13 +153,16 @@ class RerunSink:
             self.col(f"world/meas/{sensor_id}", "points", radius=-2.5).add(
                 t_ns, step, arr, p=world(np.stack([m.position for m in ms])), rgba=rgba)
             self._pending += 1
-        if result.associations:
-            c = self.col("record/associations", "record")
-            for a in result.associations:
-                c.add(a.t_ns, step, a.t_ns if arrival_ns is None else arrival_ns, sensor=a.sensor_id, seq=a.seq,
-                      outcome=a.outcome.value, label="" if a.track_id is None else short_id(a.track_id),
-                      gated=[short_id(g) for g in a.gated], nis=np.nan if a.nis is None else float(a.nis))
-            self._pending += len(result.associations)
+        A = result.associations
+        if A:
+            t_a = [a.t_ns for a in A]
+            self.col("record/associations", "record").extend(
+                t_a, [step] * len(A), t_a if arrival_ns is None else [arrival_ns] * len(A),
+                sensor=[a.sensor_id for a in A], seq=[a.seq for a in A], outcome=[a.outcome.value for a in A],
+                label=["" if a.track_id is None else short_id(a.track_id) for a in A],
+                gated=[[short_id(g) for g in a.gated] for a in A],
+                nis=[np.nan if a.nis is None else float(a.nis) for a in A])
+            self._pending += len(A)
         for e in result.estimates:
             self._est.append((e, e.t_ns if arrival_ns is None else arrival_ns, step))
             self._newest_t = max(self._newest_t, e.t_ns)
@@ -177,16 +184,30 @@ class RerunSink:
     # ---- writing ---------------------------------------------------------------------------------
     def maybe_flush(self) -> None:
         if self._pending >= self._flush_rows or time.monotonic() - self._last_flush >= self._interval:
-            self.flush()
+            self._flush(views=time.monotonic() - self._last_view_flush >= self._view_interval)
 
     def flush(self) -> None:
         """Derive the rows of the kept estimates and write every pending row as columns."""
+        self._flush(views=True)
+
+    def _flush(self, *, views: bool) -> None:
+        """Write the record's rows, and the viewed tracks' rows too when `views`."""
         est, self._est = self._est, []
+        truth, self._truth_rows = self._truth_rows, []
+        if truth:
+            t_t = [r[0] for r in truth]
+            W = world(np.stack([r[2] for r in truth])[:, self.rows.pi])
+            self.col("world/truth", "points", rgba=colour("truth"), radius=-1.5).extend(
+                t_t, [r[1] for r in truth], t_t, p=list(W[:, None, :]))
         self.rows.derive(est, self)
         if self._counts is not None and self._pending:
             for name, v in sorted(self._counts().items()):
                 self.col(f"counts/{name}", "scalars", width=1).add(self._newest_t, self._step, self._newest_t, v=[v])
-        cols, self._cols = self._cols, {}
+        if views:
+            cols, self._cols = self._cols, {}
+            self._last_view_flush = time.monotonic()
+        else:
+            cols = {k: self._cols.pop(k) for k in list(self._cols) if not k.startswith(_VIEW_ENTITIES)}
         if cols and self._epoch is None:
             firsts = [c.t_ns[0] for c in cols.values() if len(c)]
             arrivals = [c.arrival_ns[0] for c in cols.values() if len(c)]

@@ -1,7 +1,7 @@
 """The rows a flush derives from the kept estimates (see fusion.io.rerun_sink for the layout and
 fusion.io.derive for the math): the all-track data of record, the trails, and the time series of
 the viewed tracks. Stacked numpy over all estimates of a flush; the per-track work is bounded by
-the number of viewed tracks (rerun_sink.MAX_VIEWED)."""
+the number of viewed tracks (MAX_VIEWED)."""
 
 from __future__ import annotations
 
@@ -18,6 +18,7 @@ from fusion.tracking.results import Estimate
 
 OSPA_EVERY_NS = 1_000_000_000  # OSPA / GOSPA at most once per second of sensor time
 OSPA_MAX_POINTS = 300  # and for scenes of at most this many tracks and targets (the assignment is cubic)
+MAX_VIEWED = 6  # tracks with views of their own: the first confirmed ones
 TRUTH_KEPT = 100_000  # truth times kept for scoring (the oldest half dropped past this)
 
 
@@ -31,7 +32,6 @@ class Rows:
         self.axes = [layout[i] for i in pi]
         self.truth: dict[int, dict[str, Array]] = defaultdict(dict)
         self.viewed: dict[int, str] = {}  # track id -> label, in order of confirmation
-        self._max_viewed = 6
         self._last: dict[int, tuple[int, int, int, Array]] = {}  # viewed track -> newest (t, step, arrival, world)
         self._lo = np.full(3, np.inf)
         self._hi = np.full(3, -np.inf)
@@ -65,10 +65,12 @@ class Rows:
         retracted = [r for r in est if r[0].status == "retracted"]
         live = [r for r in est if r[0].status != "retracted"]
         rec = sink.col("record/estimates", "record")
-        for e, arr, step in retracted:
-            rec.add(e.t_ns, step, arr, track=e.track_id, label=short_id(e.track_id), sensor=e.sensor_id, seq=e.seq,
-                    status=e.status, revision=e.revision, x=np.empty(0), std=np.empty(0), nis=np.nan, nis_dof=0,
-                    nees=np.nan, nees_dof=0, error=np.empty(0), target="")
+        d = len(self.layout)
+        for e, arr, step in retracted:  # x, std, error: NaN rows
+            nan = np.full((1, d), np.nan)
+            rec.extend([e.t_ns], [step], [arr], blocks={"x": nan, "std": nan, "error": nan}, track=[e.track_id],
+                       label=[short_id(e.track_id)], sensor=[e.sensor_id], seq=[e.seq], status=[e.status],
+                       revision=[e.revision], nis=[np.nan], nis_dof=[0], nees=[np.nan], nees_dof=[0], target=[""])
         if not live:
             return
         E_ = [r[0] for r in live]
@@ -95,10 +97,9 @@ class Rows:
         ids = [e.track_id for e in E_]
         status = [e.status for e in E_]
         rec.extend(t, step, arr, track=ids, label=[short_id(i) for i in ids], sensor=[e.sensor_id for e in E_],
-                   seq=[e.seq for e in E_], status=status, revision=[e.revision for e in E_], x=list(X), std=list(std),
-                   nis=nis.tolist(), nis_dof=nis_dof.tolist(), nees=nees.tolist(),
-                   nees_dof=np.where(matched, len(self.ki), 0).tolist(),
-                   error=[err[i] if matched[i] else np.empty(0) for i in range(n)], target=target)
+                   seq=[e.seq for e in E_], status=status, revision=[e.revision for e in E_],
+                   blocks={"x": X, "std": std, "error": err}, nis=nis.tolist(), nis_dof=nis_dof.tolist(),
+                   nees=nees.tolist(), nees_dof=np.where(matched, len(self.ki), 0).tolist(), target=target)
         W = derive.world(X[:, self.pi])
         conf = np.array([s == "confirmed" for s in status])
         for mask, entity, role, radius in ((conf, "world/estimates", "estimate", -2.0),
@@ -110,7 +111,7 @@ class Rows:
             self._lo = np.minimum(self._lo, W[conf].min(axis=0))
             self._hi = np.maximum(self._hi, W[conf].max(axis=0))
         for i in np.flatnonzero(conf).tolist():
-            if len(self.viewed) >= self._max_viewed:
+            if len(self.viewed) >= MAX_VIEWED:
                 break
             if ids[i] not in self.viewed:
                 self.viewed[ids[i]] = short_id(ids[i])
