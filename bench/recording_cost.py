@@ -6,8 +6,9 @@ every scan (so estimates are scored: error, NEES, OSPA). Each scan goes through 
 and the result to the sink with log_step, as fusion.pipeline does. Three runs interleaved per
 repeat: no sink (the baseline), the shipped RerunSink, and main's sink before this change (read
 from git as a reference only, when the repository has a `main` branch). Reported: microseconds per
-measurement, and the sink's share = (with sink - without) / measurements, in steady state (the
-flushes on the sink's own cadence); the final flush of what is pending plus the close, a cost per
+measurement; the sink's share two ways: the difference (with sink - without) / measurements,
+which the machine's load makes noisy, and the time inside the sink's own calls (log_truth,
+log_step and the flushes on the sink's cadence) / measurements; the final flush of what is pending plus the close, a cost per
 file, apart in milliseconds.
 """
 
@@ -66,21 +67,25 @@ def _truths(n_targets: int, n_scans: int, *, seed: int = 0) -> list[np.ndarray]:
     return out
 
 
-def _run(data: list, truths: list, kind: str, cls: Any, tmp: Path) -> tuple[float, float, int]:
-    """(seconds of steady-state processing with the flushes on the sink's cadence, seconds of the
-    final flush and close, measurements)."""
+def _run(data: list, truths: list, kind: str, cls: Any, tmp: Path) -> tuple[float, float, float, int]:
+    """(seconds of steady-state processing with the flushes on the sink's cadence, seconds inside
+    the sink's calls (log_truth, log_step and the flushes they make), seconds of the final flush
+    and close, measurements)."""
     tr = Tracker(_config())
     sink = None
     if cls is not None:
         sink = cls(tmp / f"{kind}.rrd", layout=tr.layout, position_indices=tr.position_indices,
                    velocity_indices=tr.velocity_indices, counts=lambda: tr.counts.flat())
     seq = n_meas = 0
+    inside = 0.0
     t0 = time.perf_counter()
     for k, pts in enumerate(data):
         t = (k + 1) * 100_000_000
         if sink is not None:
+            a = time.perf_counter()
             for j, x in enumerate(truths[k]):
                 sink.log_truth(f"target{j}", t, x)
+            inside += time.perf_counter() - a
         dets = []
         for p in pts:
             dets.append(Detection.of("cam", t, seq, p))
@@ -88,11 +93,13 @@ def _run(data: list, truths: list, kind: str, cls: Any, tmp: Path) -> tuple[floa
         n_meas += len(dets)
         r = tr.process(dets)
         if sink is not None:
+            a = time.perf_counter()
             sink.log_step(r)
+            inside += time.perf_counter() - a
     steady = time.perf_counter() - t0
     if sink is not None:
         sink.close()  # the final flush of everything pending, and the footer
-    return steady, time.perf_counter() - t0 - steady, n_meas
+    return steady, inside, time.perf_counter() - t0 - steady, n_meas
 
 
 def run(*, quick: bool = False) -> dict[str, float]:
@@ -104,28 +111,34 @@ def run(*, quick: bool = False) -> dict[str, float]:
     out: dict[str, float] = {}
     print("recording cost per measurement: T CV targets, one sensor at 10 Hz, clutter T/10 per scan, truth logged; "
           f"median [min, max] of {repeats} interleaved repeats")
-    print(f"{'tracks':>6} {'sink':>14} {'us/meas':>10} {'sink us/meas':>22} {'x no sink':>9} {'close ms':>9}")
+    print(f"{'tracks':>6} {'sink':>14} {'us/meas':>10} {'difference us/meas':>22} {'in sink us/meas':>22} "
+          f"{'x no sink':>9} {'close ms':>9}")
     for n_targets in (10, 100, 1000):
         n_scans = {10: 300 if not quick else 100, 100: 100 if not quick else 40, 1000: 40 if not quick else 15}[n_targets]
         data = scans(n_targets, n_scans)
         truths = _truths(n_targets, n_scans)
         times: dict[str, list[float]] = {k: [] for k in sinks}
         closing: dict[str, list[float]] = {k: [] for k in sinks}
+        inside: dict[str, list[float]] = {k: [] for k in sinks}
         n_meas = 0
         with tempfile.TemporaryDirectory() as d:
             for _ in range(repeats):
                 for kind, cls in sinks.items():
-                    s, c, n_meas = _run(data, truths, kind.split()[0], cls, Path(d))
+                    s, i, c, n_meas = _run(data, truths, kind.split()[0], cls, Path(d))
                     times[kind].append(s)
+                    inside[kind].append(i)
                     closing[kind].append(c)
         base = statistics.median(times["none"])
         for kind, v in times.items():
             med = statistics.median(v)
             share = [(x - b) / n_meas * 1e6 for x, b in zip(v, times["none"], strict=True)]
             spread = "" if kind == "none" else f"{statistics.median(share):8.1f} [{min(share):.1f}, {max(share):.1f}]"
-            print(f"{n_targets:>6} {kind:>14} {med / n_meas * 1e6:10.1f} {spread:>22} {med / base:9.2f} "
+            ins = [x / n_meas * 1e6 for x in inside[kind]]
+            ins_s = "" if kind == "none" else f"{statistics.median(ins):8.1f} [{min(ins):.1f}, {max(ins):.1f}]"
+            print(f"{n_targets:>6} {kind:>14} {med / n_meas * 1e6:10.1f} {spread:>22} {ins_s:>22} {med / base:9.2f} "
                   f"{statistics.median(closing[kind]) * 1e3:9.0f}")
             out[f"{kind}_{n_targets}_sink_us_per_meas"] = statistics.median(share)
+            out[f"{kind}_{n_targets}_in_sink_us_per_meas"] = statistics.median(ins)
     return out
 
 

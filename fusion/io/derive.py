@@ -129,11 +129,6 @@ def nees(E: Array, P: Array, ki: list[int]) -> Array:
     return np.einsum("ij,ij->i", e, np.linalg.solve(Pk, e[..., None])[..., 0])
 
 
-def gain(prior_P: Array, H: Array, S: Array) -> Array:
-    """K = P- H' S^-1 for one update: (d, m)."""
-    return np.linalg.solve(S, H @ prior_P).T  # S symmetric: (S^-1 H P-)' = P- H' S^-1
-
-
 def set_distances(points: Array, truth_points: Array) -> tuple[float, float]:
     """(OSPA, GOSPA) between estimated and true positions, order 2, cut-off OSPA_C_M metres."""
     return ospa(points, truth_points, c=OSPA_C_M), gospa(points, truth_points, c=OSPA_C_M)

@@ -168,13 +168,6 @@ class Rows:
                 sink.col(f"{base}/position/{ax}/measurement", "scalars", width=1, names=["associated measurement"],
                          colors=[colour("associated")], points=True).extend(
                     t[meas], step[meas], arr[meas], v=[[float(es[k].meas_pos[a])] for k in meas])  # type: ignore[index]
-        upd = [k for k, e in enumerate(es) if e.nis is not None and e.y is not None]
-        for k in upd:
-            m = int(es[k].y.shape[0])  # type: ignore[union-attr]
-            lo, hi = derive.chi2_bounds(m)
-            sink.col(f"{base}/nis", "scalars", width=3, names=[f"NIS (m={m})", "2.5 %", "97.5 %"],
-                     colors=[colour("nis"), colour("bound"), colour("bound")]).add(
-                int(t[k]), int(step[k]), int(arr[k]), v=[es[k].nis, lo, hi])
         if mt.any():
             lo, hi = derive.chi2_bounds(len(self.ki))
             nv = c.nees[rows][mt]
@@ -188,26 +181,45 @@ class Rows:
         self._cursor(sink, tid, lab, rows, es, c)
 
     def _update_parts(self, sink: Any, base: str, es: list[Estimate], t: Array, step: Array, arr: Array) -> None:
-        """Kalman gain, innovation with +-2 sqrt(diag S), IMM mode probabilities."""
+        """NIS with its bounds, innovation with +-2 sqrt(diag S) and Kalman gain, per sensor
+        (stacked: one batched solve per sensor), and IMM mode probabilities."""
         d = len(self.layout)
+        by_sensor: dict[str, list[int]] = defaultdict(list)
         for k, e in enumerate(es):
-            if e.y is not None and e.S is not None:
-                m = e.y.shape[0]
-                s2 = 2.0 * np.sqrt(np.clip(np.diagonal(e.S), 0.0, None))
-                names = [f"y{j}" for j in range(m)] + [f"+2 sqrt S{j}{j}" for j in range(m)] + \
-                        [f"-2 sqrt S{j}{j}" for j in range(m)]
-                sink.col(f"{base}/innovation/{e.sensor_id}", "scalars", width=3 * m, names=names,
-                         colors=series_colours(m) + [colour("bound")] * 2 * m).add(
-                    int(t[k]), int(step[k]), int(arr[k]), v=np.concatenate([e.y, s2, -s2]))
-                if e.H is not None and e.prior_P is not None:
-                    K = derive.gain(e.prior_P, e.H, e.S)
-                    sink.col(f"{base}/gain/{e.sensor_id}", "scalars", width=d * m,
-                             names=[f"K[{x},{j}]" for x in self.layout for j in range(m)],
-                             colors=series_colours(d * m)).add(int(t[k]), int(step[k]), int(arr[k]), v=K.ravel())
-            if e.mode_probabilities is not None:
-                mu = e.mode_probabilities
-                sink.col(f"{base}/mode", "scalars", width=len(mu), names=[f"model {j}" for j in range(len(mu))],
-                         colors=series_colours(len(mu))).add(int(t[k]), int(step[k]), int(arr[k]), v=mu)
+            if e.y is not None and e.S is not None and e.nis is not None:
+                by_sensor[e.sensor_id].append(k)
+        for sensor, ks in sorted(by_sensor.items()):
+            sel = np.array(ks)
+            Y = np.stack([es[k].y for k in ks])  # type: ignore[misc]
+            S = np.stack([es[k].S for k in ks])  # type: ignore[misc]
+            m = Y.shape[1]
+            lo, hi = derive.chi2_bounds(m)
+            nis = np.array([es[k].nis for k in ks], dtype=np.float64)
+            sink.col(f"{base}/nis", "scalars", width=3, names=[f"NIS (m={m})", "2.5 %", "97.5 %"],
+                     colors=[colour("nis"), colour("bound"), colour("bound")]).extend(
+                t[sel], step[sel], arr[sel], v=list(np.column_stack([nis, np.full_like(nis, lo), np.full_like(nis, hi)])))
+            s2 = 2.0 * np.sqrt(np.clip(np.diagonal(S, axis1=1, axis2=2), 0.0, None))
+            names = [f"y{j}" for j in range(m)] + [f"+2 sqrt S{j}{j}" for j in range(m)] + \
+                    [f"-2 sqrt S{j}{j}" for j in range(m)]
+            sink.col(f"{base}/innovation/{sensor}", "scalars", width=3 * m, names=names,
+                     colors=series_colours(m) + [colour("bound")] * 2 * m).extend(
+                t[sel], step[sel], arr[sel], v=list(np.concatenate([Y, s2, -s2], axis=1)))
+            kg = [k for k in ks if es[k].H is not None and es[k].prior_P is not None]
+            if kg:
+                gs = np.array(kg)
+                H = np.stack([es[k].H for k in kg])  # type: ignore[misc]
+                Pm = np.stack([es[k].prior_P for k in kg])  # type: ignore[misc]
+                Sg = np.stack([es[k].S for k in kg])  # type: ignore[misc]
+                K = np.swapaxes(np.linalg.solve(Sg, H @ Pm), 1, 2)  # P- H' S^-1, S symmetric
+                sink.col(f"{base}/gain/{sensor}", "scalars", width=d * m,
+                         names=[f"K[{x},{j}]" for x in self.layout for j in range(m)],
+                         colors=series_colours(d * m)).extend(t[gs], step[gs], arr[gs], v=list(K.reshape(len(kg), -1)))
+        mk = [k for k, e in enumerate(es) if e.mode_probabilities is not None]
+        if mk:
+            mu = np.stack([es[k].mode_probabilities for k in mk])  # type: ignore[misc]
+            sel = np.array(mk)
+            sink.col(f"{base}/mode", "scalars", width=mu.shape[1], names=[f"model {j}" for j in range(mu.shape[1])],
+                     colors=series_colours(mu.shape[1])).extend(t[sel], step[sel], arr[sel], v=list(mu))
 
     def _cursor(self, sink: Any, tid: int, lab: str, rows: Array, es: list[Estimate], c: _Stacked) -> None:
         """Labelled point and 2-sigma ellipse at the cursor; a start marker at the first row."""
