@@ -29,14 +29,19 @@ examples:
   fusion replay run1.fstream --realtime                    # paced at the recorded arrival times"""
 
 INSPECT_DESCRIPTION = """\
-Summarise a recording (.rrd) without a screen: time span, sensors, tracks, position RMSE against
-the truth, NIS and NEES with chi-square verdicts, counts of late, duplicate and refused samples.
-Works on the file of a crashed service too. To look at it: rerun FILE."""
+Summarise a recording (.rrd) without a screen: time span, sensors, a table of the confirmed
+tracks (short labels, times in seconds), position RMSE and OSPA/GOSPA against the truth, NIS and
+NEES with chi-square verdicts that allow for time correlation (and say what they assume), counts
+of late, duplicate and refused samples, events. Only the latest revision of each estimate counts.
+Takes one file, several, a folder or a glob: the files of a rotated recording are merged in time
+order, and any one of them is summarised on its own. Works on the file of a crashed service too.
+To look at it: rerun FILE."""
 
 INSPECT_EXAMPLES = """\
 examples:
   fusion inspect recordings/mix.rrd
-  fusion inspect recordings/mix.rrd --json | python -m json.tool"""
+  fusion inspect recordings/mix.rrd --json | python -m json.tool
+  fusion inspect recordings/service/          # every file of a rotated recording"""
 
 
 def add(sub: Any, common: argparse.ArgumentParser) -> None:

@@ -49,6 +49,7 @@ from fusion.io.palette import colour
 from fusion.tracking.results import Estimate, Outcome, StepResult
 
 _VIEW_ENTITIES = ("tracks/", "world/tracks/")
+TRUTH_WAIT_NS = 2_000_000_000
 _USED = (Outcome.UPDATED,)  # a measurement that started a track is not drawn as associated
 _RGBA_USED = np.array(colour("associated"), dtype=np.uint8)
 _RGBA_CLUTTER = np.array(colour("clutter"), dtype=np.uint8)
@@ -184,15 +185,21 @@ class RerunSink:
     # ---- writing ---------------------------------------------------------------------------------
     def maybe_flush(self) -> None:
         if self._pending >= self._flush_rows or time.monotonic() - self._last_flush >= self._interval:
-            self._flush(views=time.monotonic() - self._last_view_flush >= self._view_interval)
+            self._flush(views=time.monotonic() - self._last_view_flush >= self._view_interval, final=False)
 
     def flush(self) -> None:
         """Derive the rows of the kept estimates and write every pending row as columns."""
-        self._flush(views=True)
+        self._flush(views=True, final=True)
 
-    def _flush(self, *, views: bool) -> None:
-        """Write the record's rows, and the viewed tracks' rows too when `views`."""
+    def _flush(self, *, views: bool, final: bool) -> None:
+        """Write the record's rows, and the viewed tracks' rows too when `views`. Unless `final`,
+        estimates newer than the newest truth (by at most TRUTH_WAIT_NS) wait for the next flush:
+        truth may arrive just after the measurements of the same time, and scoring needs it."""
         est, self._est = self._est, []
+        newest = self.rows.newest_truth_ns
+        if not final and newest is not None:
+            self._est = [r for r in est if newest < r[0].t_ns <= newest + TRUTH_WAIT_NS]
+            est = [r for r in est if not newest < r[0].t_ns <= newest + TRUTH_WAIT_NS]
         truth, self._truth_rows = self._truth_rows, []
         if truth:
             t_t = [r[0] for r in truth]

@@ -36,12 +36,14 @@ class Rows:
         self._lo = np.full(3, np.inf)
         self._hi = np.full(3, -np.inf)
         self._next_ospa = -(2**62)
+        self.newest_truth_ns: int | None = None
 
     def continue_from(self, other: Rows) -> None:
         self.truth.update(other.truth)
         self.viewed = dict(other.viewed)
         self._last = dict(other._last)
         self._lo, self._hi, self._next_ospa = other._lo.copy(), other._hi.copy(), other._next_ospa
+        self.newest_truth_ns = other.newest_truth_ns
 
     def viewed_labels(self) -> list[str]:
         return list(self.viewed.values())
@@ -55,6 +57,8 @@ class Rows:
     def add_truth(self, target_id: str, t_ns: int, state: Array) -> Array:
         s = np.asarray(state, dtype=np.float64)
         self.truth[t_ns][target_id] = s
+        if self.newest_truth_ns is None or t_ns > self.newest_truth_ns:
+            self.newest_truth_ns = t_ns
         if len(self.truth) > TRUTH_KEPT:
             for k in sorted(self.truth)[: TRUTH_KEPT // 2]:
                 del self.truth[k]
@@ -228,7 +232,7 @@ class Rows:
         w = f"world/tracks/{lab}"
         if tid not in self._last:
             sink.col(f"{w}/start", "points", rgba=colour("start"), radius=-6.0).add(
-                int(t[0]), int(step[0]), int(arr[0]), p=W[:1], label=[f"{lab} start"])
+                int(t[0]), int(step[0]), int(arr[0]), p=W[:1])  # green: the colour says start, no text to clutter
         self._last[tid] = (int(t[-1]), int(step[-1]), int(arr[-1]), W[-1].copy())
         sink.col(f"{w}/now", "points", rgba=colour("estimate"), radius=-5.0, show_labels=True).extend(
             t, step, arr, p=list(W[:, None, :]), label=[[lab]] * len(rows))
@@ -251,7 +255,7 @@ class Rows:
         for tid, (t, step, arr, w) in sorted(self._last.items()):
             lab = self.viewed[tid]
             sink.col(f"world/tracks/{lab}/end", "points", rgba=colour("end"), radius=-6.0).add(
-                t, step, arr, p=w[None, :], label=[f"{lab} end"])
+                t, step, arr, p=w[None, :])
 
 
 class _Stacked:
