@@ -1,115 +1,146 @@
-"""Amortised cost of recording every step to Rerun, per measurement.
+"""Cost of recording every step to Rerun, per measurement, at 10, 100 and 1000 tracks.
 
-The mix scenario (radar + Cartesian sensor, clutter, late arrivals) through the pipeline in
-batches of 50 samples, with no sink, with the columnar RerunSink (fusion), and with a sink that
-calls rec.log per row (the naive way), interleaved in one process. Reported: microseconds per
-measurement, and the sink's share = (with sink - without) / measurements.
+Scenario (bench.tracker_scan.scans): T constant-velocity targets in a 10 km square, one Cartesian
+sensor at 10 Hz with clutter (T/10 false returns per scan), the truth of every target logged at
+every scan (so estimates are scored: error, NEES, OSPA). Each scan goes through Tracker.process
+and the result to the sink with log_step, as fusion.pipeline does. Three runs interleaved per
+repeat: no sink (the baseline), the shipped RerunSink, and main's sink before this change (read
+from git as a reference only, when the repository has a `main` branch). Reported: microseconds per
+measurement; the sink's share two ways: the difference (with sink - without) / measurements,
+which the machine's load makes noisy, and the time inside the sink's own calls (log_truth,
+log_step and the flushes on the sink's cadence) / measurements; the final flush of what is pending plus the close, a cost per
+file, apart in milliseconds.
 """
 
 from __future__ import annotations
 
-import logging
+import importlib.util
 import statistics
+import subprocess
+import sys
 import tempfile
 import time
 from pathlib import Path
 from typing import Any
 
-import msgspec
+import numpy as np
 
-from fusion.io import wire
+from bench.tracker_scan import scans
+from fusion.config import CartesianSensorConfig, LifecycleConfig, MotionConfig, TrackerConfig
 from fusion.io.rerun_sink import RerunSink
-from fusion.pipeline import Pipeline
-from fusion.tracking.results import StepResult
+from fusion.tracking.detection import Detection
 from fusion.tracking.tracker import Tracker
-from publishers.spec import load_scenario_file, scenario_path
-from publishers.stream import build_stream
+
+REPO = Path(__file__).resolve().parents[1]
 
 
-class PerCallSink:
-    """Logs every estimate with one rec.log call per archetype: the cost the columnar sink avoids."""
-
-    def __init__(self, path: Path, tracker: Tracker) -> None:
-        import rerun as rr
-
-        self.rr = rr
-        self.rec = rr.RecordingStream("fusion-bench", recording_id="percall")
-        self.rec.save(str(path))
-        self.pi = list(tracker.position_indices)
-
-    def log_step(self, result: StepResult, *, arrival_ns: int | None = None) -> None:
-        rr = self.rr
-        for e in result.estimates:
-            if e.status == "retracted":
-                continue
-            self.rec.set_time("t", timestamp=e.t_ns * 1e-9)
-            self.rec.log(f"world/tracks/{e.track_id}", rr.Points2D([e.x[self.pi]]))
-            self.rec.log(f"tracks/{e.track_id}/nis", rr.Scalars(e.nis or 0.0))
-
-    def log_truth(self, target_id: str, t_ns: int, state: Any) -> None:
-        pass
-
-    def log_text(self, t_ns: int, text: str, level: str = "INFO") -> None:
-        pass
-
-    def close(self) -> None:
-        self.rec.flush()
-        self.rec.disconnect()
+def _main_sink() -> Any:
+    """main's RerunSink class, loaded from `git show main:fusion/io/rerun_sink.py` (None without it)."""
+    try:
+        src = subprocess.run(["git", "-C", str(REPO), "show", "main:fusion/io/rerun_sink.py"], capture_output=True,
+                             text=True, check=True, timeout=30).stdout
+    except (subprocess.SubprocessError, OSError):
+        return None
+    path = Path(tempfile.mkdtemp()) / "main_rerun_sink.py"
+    path.write_text(src)
+    spec = importlib.util.spec_from_file_location("main_rerun_sink", path)
+    mod = importlib.util.module_from_spec(spec)  # type: ignore[arg-type]
+    sys.modules["main_rerun_sink"] = mod
+    spec.loader.exec_module(mod)  # type: ignore[union-attr]
+    return mod.RerunSink
 
 
-def _run(records: list, cfg: Any, ns: str, sink_kind: str, tmp: Path) -> tuple[float, float]:
-    """(seconds of steady-state processing including every flush, seconds to open + close the file)."""
-    tracker = Tracker(cfg.tracker)
-    sink: Any = None
-    t_open = time.perf_counter()
-    if sink_kind == "columnar":
-        sink = RerunSink(tmp / "c.rrd", layout=tracker.layout, position_indices=tracker.position_indices,
-                         velocity_indices=tracker.velocity_indices, counts=lambda: tracker.counts.flat())
-    elif sink_kind == "per-call":
-        sink = PerCallSink(tmp / "p.rrd", tracker)
-    fixed = time.perf_counter() - t_open
-    pipe = Pipeline(tracker, wire.Codec(ns), sink=sink)
+def _config() -> TrackerConfig:
+    return TrackerConfig(sensors=[CartesianSensorConfig(id="cam", std_m=[1.0, 1.0])],
+                         motion=MotionConfig(accel_psd_m2s3=0.1), lifecycle=LifecycleConfig(confirm_m=2, confirm_n=3))
+
+
+def _truths(n_targets: int, n_scans: int, *, seed: int = 0) -> list[np.ndarray]:
+    """The true states of bench.tracker_scan.scans (same seed, same draws)."""
+    rng = np.random.default_rng(seed)
+    x = np.column_stack([rng.uniform(-5000, 5000, n_targets), rng.uniform(-20, 20, n_targets),
+                         rng.uniform(-5000, 5000, n_targets), rng.uniform(-20, 20, n_targets)])
+    out = []
+    for _ in range(n_scans):
+        x = x + 0.1 * np.column_stack([x[:, 1], np.zeros(n_targets), x[:, 3], np.zeros(n_targets)])
+        out.append(x.copy())
+    return out
+
+
+def _run(data: list, truths: list, kind: str, cls: Any, tmp: Path) -> tuple[float, float, float, int]:
+    """(seconds of steady-state processing with the flushes on the sink's cadence, seconds inside
+    the sink's calls (log_truth, log_step and the flushes they make), seconds of the final flush
+    and close, measurements)."""
+    tr = Tracker(_config())
+    sink = None
+    if cls is not None:
+        sink = cls(tmp / f"{kind}.rrd", layout=tr.layout, position_indices=tr.position_indices,
+                   velocity_indices=tr.velocity_indices, counts=lambda: tr.counts.flat())
+    seq = n_meas = 0
+    inside = 0.0
     t0 = time.perf_counter()
-    for i in range(0, len(records), 50):
-        pipe.ingest(records[i:i + 50])
-    if isinstance(sink, RerunSink):
-        sink.flush()  # every row handed to rerun: part of the steady-state cost
+    for k, pts in enumerate(data):
+        t = (k + 1) * 100_000_000
+        if sink is not None:
+            a = time.perf_counter()
+            for j, x in enumerate(truths[k]):
+                sink.log_truth(f"target{j}", t, x)
+            inside += time.perf_counter() - a
+        dets = []
+        for p in pts:
+            dets.append(Detection.of("cam", t, seq, p))
+            seq += 1
+        n_meas += len(dets)
+        r = tr.process(dets)
+        if sink is not None:
+            a = time.perf_counter()
+            sink.log_step(r)
+            inside += time.perf_counter() - a
     steady = time.perf_counter() - t0
-    t_close = time.perf_counter()
     if sink is not None:
-        sink.close()
-    return steady, fixed + time.perf_counter() - t_close
+        sink.close()  # the final flush of everything pending, and the footer
+    return steady, inside, time.perf_counter() - t0 - steady, n_meas
 
 
 def run(*, quick: bool = False) -> dict[str, float]:
-    logging.getLogger("fusion.pipeline").setLevel(logging.ERROR)
-    sf = load_scenario_file(scenario_path("mix"))
-    spec = msgspec.structs.replace(sf.scenario, duration_s=10.0 if quick else 60.0)
-    samples, _ = build_stream(spec, namespace=sf.service.namespace)
-    records = [(s.arrival_ns, s.key, s.payload) for s in samples]
-    n_meas = sum(1 for s in samples if "/meas/" in s.key)
-    repeats = 3 if quick else 7
-    times: dict[str, list[float]] = {"none": [], "columnar": [], "per-call": []}
-    fixed: dict[str, list[float]] = {k: [] for k in times}
-    with tempfile.TemporaryDirectory() as d:
-        for _ in range(repeats):
-            for kind in times:  # interleaved, so drift hits all three alike
-                steady, once = _run(records, sf.service, sf.service.namespace, kind, Path(d))
-                times[kind].append(steady)
-                fixed[kind].append(once)
-    med = {k: statistics.median(v) for k, v in times.items()}
-    base = med["none"]
-    print(f"recording cost, mix scenario, {n_meas} measurements, median of {repeats} interleaved runs "
-          "(steady state: every row buffered and flushed; opening and closing the file apart)")
-    print(f"{'sink':>10} {'us/meas':>10} {'sink us/meas':>13} {'x no sink':>10} {'open+close ms':>14}")
-    for k, v in med.items():
-        print(f"{k:>10} {v / n_meas * 1e6:10.1f} {(v - base) / n_meas * 1e6:13.1f} {v / base:10.2f} "
-              f"{statistics.median(fixed[k]) * 1e3:14.1f}")
-    return {f"{k}_us_per_meas": v / n_meas * 1e6 for k, v in med.items()} | {
-        "columnar_sink_us_per_meas": (med["columnar"] - base) / n_meas * 1e6,
-        "per_call_sink_us_per_meas": (med["per-call"] - base) / n_meas * 1e6,
-    }
+    sinks: dict[str, Any] = {"none": None, "shipped": RerunSink}
+    main = _main_sink()
+    if main is not None:
+        sinks["main (before)"] = main
+    repeats = 2 if quick else 3
+    out: dict[str, float] = {}
+    print("recording cost per measurement: T CV targets, one sensor at 10 Hz, clutter T/10 per scan, truth logged; "
+          f"median [min, max] of {repeats} interleaved repeats")
+    print(f"{'tracks':>6} {'sink':>14} {'us/meas':>10} {'difference us/meas':>22} {'in sink us/meas':>22} "
+          f"{'x no sink':>9} {'close ms':>9}")
+    for n_targets in (10, 100, 1000):
+        n_scans = {10: 300 if not quick else 100, 100: 100 if not quick else 40, 1000: 40 if not quick else 15}[n_targets]
+        data = scans(n_targets, n_scans)
+        truths = _truths(n_targets, n_scans)
+        times: dict[str, list[float]] = {k: [] for k in sinks}
+        closing: dict[str, list[float]] = {k: [] for k in sinks}
+        inside: dict[str, list[float]] = {k: [] for k in sinks}
+        n_meas = 0
+        with tempfile.TemporaryDirectory() as d:
+            for _ in range(repeats):
+                for kind, cls in sinks.items():
+                    s, i, c, n_meas = _run(data, truths, kind.split()[0], cls, Path(d))
+                    times[kind].append(s)
+                    inside[kind].append(i)
+                    closing[kind].append(c)
+        base = statistics.median(times["none"])
+        for kind, v in times.items():
+            med = statistics.median(v)
+            share = [(x - b) / n_meas * 1e6 for x, b in zip(v, times["none"], strict=True)]
+            spread = "" if kind == "none" else f"{statistics.median(share):8.1f} [{min(share):.1f}, {max(share):.1f}]"
+            ins = [x / n_meas * 1e6 for x in inside[kind]]
+            ins_s = "" if kind == "none" else f"{statistics.median(ins):8.1f} [{min(ins):.1f}, {max(ins):.1f}]"
+            print(f"{n_targets:>6} {kind:>14} {med / n_meas * 1e6:10.1f} {spread:>22} {ins_s:>22} {med / base:9.2f} "
+                  f"{statistics.median(closing[kind]) * 1e3:9.0f}")
+            out[f"{kind}_{n_targets}_sink_us_per_meas"] = statistics.median(share)
+            out[f"{kind}_{n_targets}_in_sink_us_per_meas"] = statistics.median(ins)
+    return out
 
 
 if __name__ == "__main__":
-    run()
+    run(quick="--quick" in sys.argv)

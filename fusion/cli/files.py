@@ -30,14 +30,19 @@ examples:
   fusion replay recordings/maneuver2d.fstream --smooth     # smoothed tracks beside the filtered ones"""
 
 INSPECT_DESCRIPTION = """\
-Summarise a recording (.rrd) without a screen: time span, sensors, tracks, position RMSE against
-the truth, NIS and NEES with chi-square verdicts, counts of late, duplicate and refused samples.
-Works on the file of a crashed service too. To look at it: rerun FILE."""
+Summarise a recording (.rrd) without a screen: time span, sensors, a table of the confirmed
+tracks (short labels, times in seconds), position RMSE and OSPA/GOSPA against the truth, NIS and
+NEES with chi-square verdicts that allow for time correlation (and say what they assume), counts
+of late, duplicate and refused samples, events. Only the latest revision of each estimate counts.
+Takes one file, several, a folder or a glob: the files of a rotated recording are merged in time
+order, and any one of them is summarised on its own. Works on the file of a crashed service too.
+To look at it: rerun FILE."""
 
 INSPECT_EXAMPLES = """\
 examples:
   fusion inspect recordings/mix.rrd
-  fusion inspect recordings/mix.rrd --json | python -m json.tool"""
+  fusion inspect recordings/mix.rrd --json | python -m json.tool
+  fusion inspect recordings/service/          # every file of a rotated recording"""
 
 
 def add(sub: Any, common: argparse.ArgumentParser) -> None:
@@ -61,8 +66,9 @@ def add(sub: Any, common: argparse.ArgumentParser) -> None:
 
     ip = sub.add_parser("inspect", parents=[common], help="summarise a recording (.rrd) headlessly",
                         description=INSPECT_DESCRIPTION, epilog=INSPECT_EXAMPLES, formatter_class=a.Formatter)
-    ip.add_argument("file", type=Path, metavar="FILE",
-                    help="a recording (.rrd) written by fusion serve, demo or replay")
+    ip.add_argument("file", type=str, metavar="FILE", nargs="+",
+                    help="recordings (.rrd) written by fusion serve, demo or replay: files, a folder or a glob "
+                         "(a rotated set is merged in time order)")
     ip.add_argument("--json", action="store_true", help="print JSON for scripts instead of text")
     ip.set_defaults(func=inspect)
 
@@ -123,13 +129,18 @@ def replay(args: argparse.Namespace) -> int:
 
 
 def inspect(args: argparse.Namespace) -> int:
-    path = a.input_file(args.file, "recording", "fusion demo writes recordings/<scenario>.rrd")
-    _check_kind(path, RRD_MAGIC)
-    from fusion.io.inspect import format_summary, summarise
+    from fusion.io.inspect import expand, format_summary, summarise
 
+    paths = expand(args.file)
+    if not paths:
+        raise CliError(Exit.FILE, f"{' '.join(args.file)}: no recordings found; fusion demo writes "
+                                  "recordings/<scenario>.rrd")
+    for p in paths:
+        a.input_file(p, "recording", "fusion demo writes recordings/<scenario>.rrd")
+        _check_kind(p, RRD_MAGIC)
     try:
-        s = summarise(path)
+        s = summarise(paths)
     except RuntimeError as e:
-        raise CliError(Exit.FILE, f"{path}: cannot read this recording: {e}") from None
+        raise CliError(Exit.FILE, f"{' '.join(map(str, paths))}: cannot read this recording: {e}") from None
     print(s.to_json() if args.json else format_summary(s))
     return 0

@@ -9,6 +9,7 @@ from collections.abc import Mapping
 from typing import Any
 
 from fusion import messages as m
+from fusion.io.labels import short_id
 from fusion.tracking.detection import Reason
 from fusion.tracking.results import Counts
 
@@ -101,7 +102,7 @@ def format_tracks(snap: m.Snapshot, namespace: str) -> str:
         n = len(e.state)
         pos = [i for i, name in enumerate(e.layout) if name in _POSITION]
         std = math.sqrt(sum(e.cov[i * n + i] for i in pos)) if pos and len(e.cov) == n * n else float("nan")
-        rows.append([str(e.track_id), _time(e.t_ns), *(f"{v:.2f}" for v in e.state), f"{std:.2f}", e.sensor_id,
+        rows.append([short_id(e.track_id), _time(e.t_ns), *(f"{v:.2f}" for v in e.state), f"{std:.2f}", e.sensor_id,
                      "-" if e.nis is None else f"{e.nis:.2f}"])
     widths = [max(len(r[i]) for r in [head, *rows]) for i in range(len(head))]
     fmt = lambda r: "  ".join(x.rjust(w) for x, w in zip(r, widths, strict=True))  # noqa: E731

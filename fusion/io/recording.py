@@ -46,7 +46,7 @@ class RotatingSink:
         self.steps_per_file.append(0)
         sink = RerunSink(path, recording_id=path.stem, **self._kw)  # type: ignore[arg-type]
         if getattr(self, "sink", None) is not None:
-            sink._truth.update(self.sink._truth)  # scoring continues across the boundary
+            sink.continue_from(self.sink)  # scoring, viewed tracks and time axes continue across the boundary
         return sink
 
     @property

@@ -1,39 +1,39 @@
-"""Every tracker step into a Rerun .rrd file, written in columns.
+"""Every tracker step into a Rerun .rrd file, in columns, at a cost that does not grow with the
+number of tracks.
 
-Per-call `log` costs 50-150 us here and so does each `send_columns` call, whatever its size, so
-rows are buffered per entity in plain lists and written with one `send_columns` per entity when
-`flush_rows` rows are pending or `flush_interval_s` has passed (checked on each call), and at
-`close()`; and the layout keeps the number of entities small (one multi-valued Scalars entity per
-quantity, one shared entity for all tentative tracks). Nothing the tracker did is dropped.
+Rerun costs ~150-300 us per `send_columns` call here, whatever its size, so rows are buffered and
+written with one call per entity, and the number of entities is bounded: the data of record are
+a few all-track entities (one row per estimate, association or event), written every
+`flush_interval_s` (checked on each step), at `flush_rows` pending rows and at `flush()`/`close()`;
+only the first MAX_VIEWED confirmed tracks get entities of their own (their time series and
+cursor marks, ~15 each), and those are written every `view_interval_s` (and at `flush()`/`close()`):
+a killed writer loses at most that much of them, never any of the record.
 
-Entity layout (all positions in metres, world frame; 1-D tracks on the x axis of a 2-D view,
-3-D tracks with the 3-D archetypes):
-  world/meas/<sensor_id>             measured points (radar returns converted to Cartesian)
-  world/tentative                    every estimate of a tentative track (labelled with its id)
-  world/tracks/<track_id>            estimated position of a confirmed track (Points)
-  world/tracks/<track_id>/cov        2-sigma covariance ellipse (LineStrips2D) or ellipsoid (Ellipsoids3D)
-  world/tracks/<track_id>/vel        velocity (Arrows)
-  world/tracks/<track_id>/meas       the measurement that updated it: the association
-  world/truth/<target_id>            true position
-  tracks/<track_id>/state            every state component (Scalars, one series per component)
-  tracks/<track_id>/std              sqrt(diag(P))
-  tracks/<track_id>/truth            truth of the nearest true target at the same time, if within MATCH_D2
-  tracks/<track_id>/error            estimate - truth
-  tracks/<track_id>/nis              NIS of the update (degrees of freedom in tracks/<track_id>/nis_dof)
-  tracks/<track_id>/nees             NEES against the matched truth
-  tracks/<track_id>/mode             IMM model probabilities
-  events                             births, confirmations, deletions, retractions, replays, refusals (TextLog)
-  counts/<name>                      the tracker's cumulative counters (received, applied, refused_<reason>, ...)
-  meta                               static JSON: layout, position indices, sensors (TextDocument)
-Timelines: `t` (sensor time, timestamp from integer ns), `step` (tracker call counter),
-`arrival` (arrival time of the data that produced the row, where known).
+Entity layout (positions in metres, world frame, 3-D points: 1-D tracks on the x axis, 2-D in the
+z = 0 plane; track labels are fusion.io.labels.short_id of the id):
+  record/estimates       every estimate and retraction: track, label, sensor, seq, status, revision,
+                         x, std = sqrt(diag P), nis, nis_dof, nees, nees_dof, error, target (what
+                         `fusion inspect` reads; NaN where a value does not apply)
+  record/associations    every accepted measurement: sensor, seq, outcome, track label, gated labels, nis
+  record/events          births, confirmations, coasting, deletions (with reason), withdrawals,
+                         replays and refusals: kind, track, label, reason, retracted, detail
+  events                 the same as human-readable lines (TextLog)
+  world/estimates        confirmed estimates (trail), world/tentative: tentative ones (faint)
+  world/meas/<sensor>    measured points, coloured by their association outcome
+  world/truth            true positions
+  world/tracks/<label>/{now,cov,start,end}  a viewed track at the cursor: labelled point, 2-sigma
+                         ellipse (ellipsoid in 3-D), start and end markers
+  tracks/<label>/...     a viewed track's time series (see fusion.io.blueprint.TRACK_VIEWS)
+  metrics/{ospa,gospa}   set distances to truth (fusion.io.derive), counts/<name>: the tracker's counters
+  meta                   static JSON: layout, position/velocity indices, sensors
+Timelines: `t` (sensor time: a duration from the stream's start, or a timestamp for epoch times),
+`step` (tracker call counter), `arrival` (arrival time of the data that produced the row).
 """
 
 from __future__ import annotations
 
 import json
 import time
-from collections import defaultdict
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
@@ -41,37 +41,18 @@ from typing import Any
 import numpy as np
 
 from fusion.core.checks import Array
-from fusion.tracking.results import Estimate, StepResult
+from fusion.io import blueprint, track_rows
+from fusion.io.columns import Column, components, time_column
+from fusion.io.derive import world
+from fusion.io.labels import is_epoch, short_id
+from fusion.io.palette import colour
+from fusion.tracking.results import Estimate, Outcome, StepResult
 
-MATCH_D2 = 100.0  # squared Mahalanobis distance (position) within which a truth target is matched
-_COLOURS = {"tentative": (160, 160, 160), "confirmed": (40, 160, 255)}
-_CIRCLE = np.stack([np.cos(np.linspace(0, 2 * np.pi, 33)), np.sin(np.linspace(0, 2 * np.pi, 33))], axis=1)
-
-
-def ellipse_points(mean: Array, cov: Array, *, n_sigma: float = 2.0) -> Array:
-    """Points of the n-sigma ellipse of 2-D Gaussians: mean + n L u for u on the unit circle,
-    L L' = cov. mean (..., 2), cov (..., 2, 2) -> (..., 33, 2)."""
-    w, V = np.linalg.eigh(0.5 * (cov + np.swapaxes(cov, -1, -2)))
-    L = V * np.sqrt(np.clip(w, 0.0, None))[..., None, :]
-    return mean[..., None, :] + n_sigma * _CIRCLE @ np.swapaxes(L, -1, -2)
-
-
-class _Column:
-    """Pending rows of one entity: times and the archetype's fields."""
-
-    __slots__ = ("arrival_ns", "data", "kind", "step", "t_ns")
-
-    def add(self, t_ns: int, step: int, arrival_ns: int) -> None:
-        self.t_ns.append(t_ns)
-        self.step.append(step)
-        self.arrival_ns.append(arrival_ns)
-
-    def __init__(self, kind: str) -> None:
-        self.kind = kind
-        self.t_ns: list[int] = []
-        self.step: list[int] = []
-        self.arrival_ns: list[int] = []
-        self.data: dict[str, list[Any]] = defaultdict(list)
+_VIEW_ENTITIES = ("tracks/", "world/tracks/")
+TRUTH_WAIT_NS = 2_000_000_000
+_USED = (Outcome.UPDATED,)  # a measurement that started a track is not drawn as associated
+_RGBA_USED = np.array(colour("associated"), dtype=np.uint8)
+_RGBA_CLUTTER = np.array(colour("clutter"), dtype=np.uint8)
 
 
 class RerunSink:
@@ -80,8 +61,8 @@ class RerunSink:
     def __init__(
         self, path: str | Path, *, layout: tuple[str, ...], position_indices: tuple[int, ...],
         velocity_indices: tuple[int, ...], recording_id: str = "fusion", application_id: str = "fusion",
-        flush_rows: int = 20_000, flush_interval_s: float = 0.5, meta: Mapping[str, Any] | None = None,
-        counts: Callable[[], Mapping[str, int]] | None = None,
+        flush_rows: int = 200_000, flush_interval_s: float = 0.5, view_interval_s: float = 5.0,
+        meta: Mapping[str, Any] | None = None, counts: Callable[[], Mapping[str, int]] | None = None,
     ) -> None:
         import rerun as rr
 
@@ -90,286 +71,201 @@ class RerunSink:
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self.rec = rr.RecordingStream(application_id, recording_id=recording_id)
         self.rec.save(str(self.path))
-        self.layout = layout
-        self.pi = list(position_indices)
-        self.vi = list(velocity_indices)
-        self.ndim = len(position_indices)  # 1-D tracks are drawn on the x axis of a 2-D view
-        self._cols: dict[str, _Column] = {}
+        self.rows = track_rows.Rows(layout, list(position_indices), list(velocity_indices))
+        self.ndim = len(position_indices)
+        self._cols: dict[str, Column] = {}
+        self._est: list[tuple[Estimate, int, int]] = []
+        self._truth_rows: list[tuple[int, int, Array]] = []
         self._pending = 0
         self.rows_written = 0
         self._flush_rows = flush_rows
         self._interval = flush_interval_s
-        self._last_flush = time.monotonic()
+        self._last_flush = self._last_view_flush = time.monotonic()
+        self._view_interval = view_interval_s
         self._step = 0
-        self._truth: dict[int, dict[str, Array]] = defaultdict(dict)  # t_ns -> target -> state (layout order)
-        self._closed = False
-        self._named: set[str] = set()
-        self._est: list[tuple[Estimate, int, int]] = []
         self._counts = counts
         self._newest_t = 0
-        self._send_blueprint()
+        self._epoch: bool | None = None  # t is an epoch time (decided from the first rows)
+        self._arrival_epoch: bool | None = None
+        self._written: set[str] = set()
+        self._styled: set[str] = set()
+        self._layout_key: tuple = ()
+        self._closed = False
         info = {"layout": list(layout), "position_indices": list(position_indices),
-                "velocity_indices": list(velocity_indices), **(meta or {})}
+                "velocity_indices": list(velocity_indices), "labels": "fusion.io.labels.short_id", **(meta or {})}
         self.rec.log("meta", rr.TextDocument(json.dumps(info, sort_keys=True), media_type="text/plain"), static=True)
+        self._send_blueprint()
 
-    # ---- buffering ---------------------------------------------------------------------------
-    def _row(self, entity: str, kind: str, t_ns: int, arrival_ns: int | None, **fields: Any) -> None:
+    # ---- continuity across files -----------------------------------------------------------------
+    def continue_from(self, previous: RerunSink) -> None:
+        """Carry what spans files over from the sink of the previous file of a rotated set: the
+        truth kept for scoring, the viewed tracks, and the kind of the time axes."""
+        self.rows.continue_from(previous.rows)
+        self._epoch, self._arrival_epoch = previous._time_kinds()
+        self._step = previous.steps()
+
+    def _time_kinds(self) -> tuple[bool | None, bool | None]:
+        return self._epoch, self._arrival_epoch
+
+    def steps(self) -> int:
+        """Tracker steps logged so far (continued across a rotated set)."""
+        return self._step
+
+    # ---- input -----------------------------------------------------------------------------------
+    def col(self, entity: str, kind: str, **style: Any) -> Column:
+        """The pending Column of `entity` (created with its kind and style on first use)."""
         c = self._cols.get(entity)
         if c is None:
-            c = self._cols[entity] = _Column(kind)
-        c.t_ns.append(t_ns)
-        if t_ns > self._newest_t:
-            self._newest_t = t_ns
-        c.step.append(self._step)
-        c.arrival_ns.append(t_ns if arrival_ns is None else arrival_ns)
-        for k, v in fields.items():
-            c.data[k].append(v)
-        self._pending += 1
-
-    def _scalar(self, entity: str, t_ns: int, value: float, arrival_ns: int | None = None) -> None:
-        self._row(entity, "scalar", t_ns, arrival_ns, v=float(value))
-
-
-    def _world(self, p: Array) -> Array:
-        """A point (or points) for the world view: 1-D positions go on the x axis."""
-        p = np.asarray(p, dtype=np.float64)
-        if p.shape[-1] == 1:
-            return np.concatenate([p, np.zeros_like(p)], axis=-1)
-        return p
-
-    def log_measurements(self, sensor_id: str, t_ns: int, points: Array, arrival_ns: int | None = None) -> None:
-        """Measured points (k, d) of one scan, in Cartesian world coordinates."""
-        self._row(f"world/meas/{sensor_id}", "points", t_ns, arrival_ns, p=self._world(points))
-
-    def log_truth(self, target_id: str, t_ns: int, state: Array) -> None:
-        """A true state in the tracker's layout; kept to score estimates at the same t_ns."""
-        s = np.asarray(state, dtype=np.float64)
-        self._truth[t_ns][target_id] = s
-        self._row(f"world/truth/{target_id}", "points", t_ns, None, p=self._world(s[self.pi])[None, :])
-        if len(self._truth) > 100_000:  # bounded: drop the oldest times
-            for k in sorted(self._truth)[:50_000]:
-                del self._truth[k]
-
-    def log_text(self, t_ns: int, text: str, level: str = "INFO") -> None:
-        self._row("events", "text", t_ns, None, text=text, level=level)
-
-    def log_step(self, result: StepResult, *, arrival_ns: int | None = None) -> None:
-        """One Tracker.process result: estimates, events, replays and refusals."""
-        self._step += 1
-        scans: dict[tuple[str, int], list[Array]] = {}
-        for m in result.measurements:
-            scans.setdefault((m.sensor_id, m.t_ns), []).append(m.position)
-        for (sensor_id, t_ns), pts in sorted(scans.items()):
-            self.log_measurements(sensor_id, t_ns, np.stack(pts), arrival_ns)
-        for e in result.estimates:
-            self._estimate(e, arrival_ns)
-        for ev in result.events:
-            why = "" if ev.reason is None else f" {ev.reason.value}"
-            if ev.retracted:
-                self.log_text(ev.t_ns, f"track {ev.track_id} withdrawn {ev.kind.value}{why} (gone after a replay)")
-            else:
-                self.log_text(ev.t_ns, f"track {ev.track_id} {ev.kind.value}{why}")
-        for rp in result.replays:
-            late = ", ".join(f"{s}#{q}" for s, q in rp.trigger)
-            self.log_text(rp.from_t_ns, f"replay of {rp.n_scans} scans from late {late}", "WARN")
-        for r in result.refused:
-            self.log_text(r.t_ns, f"refused {r.sensor_id}#{r.seq}: {r.reason.value}: {r.detail}", "WARN")
-        self.maybe_flush()
-
-    def _estimate(self, e: Estimate, arrival_ns: int | None) -> None:
-        """Hot path: keep the estimate; everything derived from it is computed at flush time,
-        vectorised over each track's rows."""
-        if e.status == "retracted":
-            self.log_text(e.t_ns, f"track {e.track_id} retracted its estimate from {e.sensor_id} (rev {e.revision})")
-            return
-        self._est.append((e, e.t_ns if arrival_ns is None else arrival_ns, self._step))
-        self._pending += 1
-        if e.t_ns > self._newest_t:
-            self._newest_t = e.t_ns
-
-    def _derive(self) -> None:
-        """Turn the kept estimates into rows, per track, with stacked numpy operations."""
-        est, self._est = self._est, []
-        if not est:
-            return
-        by_track: dict[int, list[tuple[Estimate, int, int]]] = defaultdict(list)
-        tentative: list[tuple[Estimate, int, int]] = []
-        for item in est:
-            (tentative if item[0].status == "tentative" else by_track[item[0].track_id]).append(item)
-        if tentative:
-            c = self._col("world/tentative", "tentative")
-            for e, arr, step in tentative:
-                c.add(e.t_ns, step, arr)
-                c.data["p"].append(self._world(e.x[self.pi]))
-                c.data["label"].append(str(e.track_id))
-        names = self.layout
-        for tid in sorted(by_track):
-            rows = by_track[tid]
-            base = f"tracks/{tid}"
-            t = np.array([r[0].t_ns for r in rows], dtype=np.int64)
-            arr = np.array([r[1] for r in rows], dtype=np.int64)
-            step = np.array([r[2] for r in rows], dtype=np.int64)
-            X = np.stack([r[0].x for r in rows])
-            P = np.stack([r[0].P for r in rows])
-            pos = X[:, self.pi]
-            Pp = P[:, self.pi][:, :, self.pi]
-            wpos = self._world(pos)
-            self._cols_add(f"world/{base}", "track", t, step, arr, p=list(wpos), status=[r[0].status for r in rows])
-            if self.ndim == 1:
-                half = 2.0 * np.sqrt(Pp[:, 0, 0])
-                seg = np.stack([wpos - np.column_stack([half, 0 * half]), wpos + np.column_stack([half, 0 * half])], 1)
-                self._cols_add(f"world/{base}/cov", "strip", t, step, arr, s=list(seg))
-            elif self.ndim == 2:
-                self._cols_add(f"world/{base}/cov", "strip", t, step, arr, s=list(ellipse_points(pos, Pp)))
-            else:
-                self._cols_add(f"world/{base}/cov", "ellipsoid", t, step, arr, c=list(pos), cov=list(Pp))
-            if self.vi:
-                vel = self._world(X[:, self.vi])
-                self._cols_add(f"world/{base}/vel", "arrow", t, step, arr, o=list(wpos), v=list(vel))
-            mp = [r[0].meas_pos for r in rows]
-            if all(p is not None for p in mp):
-                self._cols_add(f"world/{base}/meas", "points", t, step, arr,
-                               p=[self._world(p)[None, :] for p in mp])  # type: ignore[arg-type]
-            self._name(f"{base}/state", names)
-            self._cols_add(f"{base}/state", "vector", t, step, arr, v=list(X))
-            self._name(f"{base}/std", names)
-            self._cols_add(f"{base}/std", "vector", t, step, arr,
-                           v=list(np.sqrt(np.clip(np.diagonal(P, axis1=1, axis2=2), 0.0, None))))
-            upd = [i for i, r in enumerate(rows) if r[0].nis is not None and r[0].y is not None]
-            if upd:
-                sel = np.array(upd)
-                self._cols_add(f"{base}/nis", "scalar", t[sel], step[sel], arr[sel], v=[rows[i][0].nis for i in upd])
-                self._cols_add(f"{base}/nis_dof", "scalar", t[sel], step[sel], arr[sel],
-                               v=[float(rows[i][0].y.shape[0]) for i in upd])  # type: ignore[union-attr]
-            if rows[0][0].mode_probabilities is not None:
-                mu = np.stack([r[0].mode_probabilities for r in rows])
-                self._name(f"{base}/mode", tuple(f"model {k}" for k in range(mu.shape[1])))
-                self._cols_add(f"{base}/mode", "vector", t, step, arr, v=list(mu))
-            self._score(base, rows, t, step, arr, X, P, Pp)
-
-    def _score(self, base: str, rows: list, t: Array, step: Array, arr: Array, X: Array, P: Array, Pp: Array) -> None:
-        """Truth, error and NEES rows against the nearest true target at the same time, when it
-        lies within MATCH_D2 (a truth sample that has not arrived yet must not pair a track with
-        another target)."""
-        idx, truths = [], []
-        for i, tt in enumerate(t.tolist()):
-            T = self._truth.get(tt)
-            if not T:
-                continue
-            cand = np.stack([T[k] for k in sorted(T)])
-            if cand.shape[1] != X.shape[1]:
-                continue
-            k = int(np.argmin(np.sum((cand[:, self.pi] - X[i, self.pi]) ** 2, axis=1)))
-            idx.append(i)
-            truths.append(cand[k])
-        if not idx:
-            return
-        sel = np.array(idx)
-        TX = np.stack(truths)
-        E = X[sel] - TX
-        dp = E[:, self.pi]
-        d2 = np.einsum("ij,ij->i", dp, np.linalg.solve(Pp[sel], dp[..., None])[..., 0])
-        ok = d2 < MATCH_D2
-        if not ok.any():
-            return
-        sel, TX, E = sel[ok], TX[ok], E[ok]
-        nees = np.einsum("ij,ij->i", E, np.linalg.solve(P[sel], E[..., None])[..., 0])
-        self._name(f"{base}/truth", self.layout)
-        self._name(f"{base}/error", self.layout)
-        self._cols_add(f"{base}/truth", "vector", t[sel], step[sel], arr[sel], v=list(TX))
-        self._cols_add(f"{base}/error", "vector", t[sel], step[sel], arr[sel], v=list(E))
-        self._cols_add(f"{base}/nees", "scalar", t[sel], step[sel], arr[sel], v=nees.tolist())
-
-    def _name(self, entity: str, names: tuple[str, ...]) -> None:
-        if entity not in self._named:
-            self._named.add(entity)
-            self.rec.log(entity, self._rr.SeriesLines(names=list(names)), static=True)
-
-    def _col(self, entity: str, kind: str) -> _Column:
-        c = self._cols.get(entity)
-        if c is None:
-            c = self._cols[entity] = _Column(kind)
+            c = self._cols[entity] = Column(kind, **style)
         return c
 
-    def _cols_add(self, entity: str, kind: str, t: Array, step: Array, arr: Array, **fields: list) -> None:
-        c = self._col(entity, kind)
-        c.t_ns.extend(t.tolist())
-        c.step.extend(step.tolist())
-        c.arrival_ns.extend(arr.tolist())
-        for k, v in fields.items():
-            c.data[k].extend(v)
+    def log_truth(self, target_id: str, t_ns: int, state: Array) -> None:
+        """A true state in the tracker's layout; kept to score estimates at the same t_ns (the
+        world/truth rows are built at flush, in one block)."""
+        s = self.rows.add_truth(target_id, t_ns, state)
+        self._truth_rows.append((t_ns, self._step, s))
+        self._pending += 1
 
-    # ---- writing -------------------------------------------------------------------------------
+    def log_text(self, t_ns: int, text: str, level: str = "INFO") -> None:
+        """A line for the events view, and a structured "note" event beside it."""
+        self._event(t_ns, "note", None, "", False, text, level)
+
+    def _event(self, t_ns: int, kind: str, track_id: int | None, reason: str, retracted: bool, text: str,
+               level: str = "INFO") -> None:
+        self.col("events", "text").add(t_ns, self._step, t_ns, text=text, level=level)
+        self.col("record/events", "record").add(
+            t_ns, self._step, t_ns, kind=kind, track=-1 if track_id is None else int(track_id),
+            label="" if track_id is None else short_id(track_id), reason=reason, retracted=retracted, detail=text)
+        self._pending += 2
+
+    def log_step(self, result: StepResult, *, arrival_ns: int | None = None) -> None:
+        """One Tracker.process result: measurements and their associations, estimates, events,
+        replays and refusals."""
+        self._step += 1
+        step = self._step
+        outcome = {(a.sensor_id, a.seq): a for a in result.associations}
+        scans: dict[tuple[str, int], list] = {}
+        for m in result.measurements:
+            scans.setdefault((m.sensor_id, m.t_ns), []).append(m)
+        for (sensor_id, t_ns), ms in sorted(scans.items()):
+            used = np.array([(a := outcome.get((m.sensor_id, m.seq))) is not None and a.outcome in _USED for m in ms])
+            rgba = np.where(used[:, None], _RGBA_USED, _RGBA_CLUTTER).astype(np.uint8)
+            arr = t_ns if arrival_ns is None else arrival_ns
+            self.col(f"world/meas/{sensor_id}", "points", radius=-2.5).add(
+                t_ns, step, arr, p=world(np.stack([m.position for m in ms])), rgba=rgba)
+            self._pending += 1
+        A = result.associations
+        if A:
+            t_a = [a.t_ns for a in A]
+            self.col("record/associations", "record").extend(
+                t_a, [step] * len(A), t_a if arrival_ns is None else [arrival_ns] * len(A),
+                sensor=[a.sensor_id for a in A], seq=[a.seq for a in A], outcome=[a.outcome.value for a in A],
+                label=["" if a.track_id is None else short_id(a.track_id) for a in A],
+                gated=[[short_id(g) for g in a.gated] for a in A],
+                nis=[np.nan if a.nis is None else float(a.nis) for a in A])
+            self._pending += len(A)
+        for e in result.estimates:
+            self._est.append((e, e.t_ns if arrival_ns is None else arrival_ns, step))
+            self._newest_t = max(self._newest_t, e.t_ns)
+        self._pending += len(result.estimates)
+        for ev in result.events:
+            why = "" if ev.reason is None else ev.reason.value
+            text = f"track {short_id(ev.track_id)} " + ("withdrawn " if ev.retracted else "") + ev.kind.value
+            text += (f" ({why})" if why else "") + (" (gone after a replay)" if ev.retracted else "")
+            self._event(ev.t_ns, ev.kind.value, ev.track_id, why, ev.retracted, text)
+        for rp in result.replays:
+            late = ", ".join(f"{s}#{q}" for s, q in rp.trigger)
+            self._event(rp.from_t_ns, "replay", None, "", False, f"replay of {rp.n_scans} scans from late {late}",
+                        "WARN")
+        for r in result.refused:
+            self._event(r.t_ns, "refused", None, r.reason.value, False,
+                        f"refused {r.sensor_id}#{r.seq}: {r.reason.value}: {r.detail}", "WARN")
+        self.maybe_flush()
+
+    # ---- writing ---------------------------------------------------------------------------------
     def maybe_flush(self) -> None:
         if self._pending >= self._flush_rows or time.monotonic() - self._last_flush >= self._interval:
-            self.flush()
+            self._flush(views=time.monotonic() - self._last_view_flush >= self._view_interval, final=False)
 
     def flush(self) -> None:
-        """Write every pending row as columns (and the tracker's counters, when given)."""
-        rr = self._rr
-        self._derive()
+        """Derive the rows of the kept estimates and write every pending row as columns."""
+        self._flush(views=True, final=True)
+
+    def _flush(self, *, views: bool, final: bool) -> None:
+        """Write the record's rows, and the viewed tracks' rows too when `views`. Unless `final`,
+        estimates newer than the newest truth (by at most TRUTH_WAIT_NS) wait for the next flush:
+        truth may arrive just after the measurements of the same time, and scoring needs it."""
+        est, self._est = self._est, []
+        newest = self.rows.newest_truth_ns
+        if not final and newest is not None:
+            self._est = [r for r in est if newest < r[0].t_ns <= newest + TRUTH_WAIT_NS]
+            est = [r for r in est if not newest < r[0].t_ns <= newest + TRUTH_WAIT_NS]
+        truth, self._truth_rows = self._truth_rows, []
+        if truth:
+            t_t = [r[0] for r in truth]
+            W = world(np.stack([r[2] for r in truth])[:, self.rows.pi])
+            self.col("world/truth", "points", rgba=colour("truth"), radius=-1.5).extend(
+                t_t, [r[1] for r in truth], t_t, p=list(W[:, None, :]))
+        self.rows.derive(est, self)
         if self._counts is not None and self._pending:
             for name, v in sorted(self._counts().items()):
-                self._scalar(f"counts/{name}", self._newest_t, v)
-        cols, self._cols = self._cols, {}
+                self.col(f"counts/{name}", "scalars", width=1).add(self._newest_t, self._step, self._newest_t, v=[v])
+        if views:
+            cols, self._cols = self._cols, {}
+            self._last_view_flush = time.monotonic()
+        else:
+            cols = {k: self._cols.pop(k) for k in list(self._cols) if not k.startswith(_VIEW_ENTITIES)}
+        if cols and self._epoch is None:
+            firsts = [c.t_ns[0] for c in cols.values() if len(c)]
+            arrivals = [c.arrival_ns[0] for c in cols.values() if len(c)]
+            self._epoch = bool(firsts) and is_epoch(min(firsts))
+            self._arrival_epoch = bool(arrivals) and is_epoch(min(arrivals))
+        rr = self._rr
         for entity in sorted(cols):
             c = cols[entity]
-            n = len(c.t_ns)
-            idx = [
-                rr.TimeColumn("t", timestamp=np.array(c.t_ns, dtype="datetime64[ns]")),
-                rr.TimeColumn("step", sequence=np.array(c.step, dtype=np.int64)),
-                rr.TimeColumn("arrival", timestamp=np.array(c.arrival_ns, dtype="datetime64[ns]")),
-            ]
-            d = c.data
-            if c.kind == "scalar":
-                columns = rr.Scalars.columns(scalars=np.array(d["v"]))
-            elif c.kind == "vector":
-                columns = rr.Scalars.columns(scalars=np.concatenate(d["v"])).partition([len(v) for v in d["v"]])
-            elif c.kind == "tentative":
-                pts = np.stack(d["p"])
-                arch = rr.Points2D if pts.shape[1] == 2 else rr.Points3D
-                # ids kept as labels (hover shows them) but not drawn: clutter would bury the view
-                columns = arch.columns(positions=pts, labels=d["label"], show_labels=np.zeros(n, dtype=bool),
-                                       colors=np.tile(np.array(_COLOURS["tentative"], dtype=np.uint8), (n, 1)))
-            elif c.kind == "text":
-                columns = rr.TextLog.columns(text=d["text"], level=d["level"])
-            elif c.kind == "points":
-                lens = [len(p) for p in d["p"]]
-                pts = np.concatenate(d["p"]) if n else np.empty((0, max(self.ndim, 2)))
-                arch = rr.Points2D if pts.shape[1] == 2 else rr.Points3D
-                columns = arch.columns(positions=pts).partition(lens)
-            elif c.kind == "track":
-                pts = np.stack(d["p"])
-                arch = rr.Points2D if pts.shape[1] == 2 else rr.Points3D
-                colours = np.array([_COLOURS.get(s, (255, 80, 80)) for s in d["status"]], dtype=np.uint8)
-                columns = arch.columns(positions=pts, colors=colours, radii=np.full(n, 0.5))
-            elif c.kind == "strip":
-                columns = rr.LineStrips2D.columns(strips=d["s"]).partition([1] * n)
-            elif c.kind == "ellipsoid":
-                half, quat = [], []
-                for cov in d["cov"]:
-                    w, V = np.linalg.eigh(cov)
-                    if np.linalg.det(V) < 0:
-                        V[:, 0] = -V[:, 0]
-                    half.append(2.0 * np.sqrt(np.clip(w, 0.0, None)))
-                    quat.append(_quat_xyzw(V))
-                columns = rr.Ellipsoids3D.columns(
-                    centers=np.stack(d["c"]), half_sizes=np.stack(half), quaternions=np.stack(quat)
-                )
-            elif c.kind == "arrow":
-                arch = rr.Arrows2D if self.ndim <= 2 else rr.Arrows3D
-                columns = arch.columns(origins=np.stack(d["o"]), vectors=np.stack(d["v"]))
-            else:  # pragma: no cover - every kind above is produced by this class
-                raise AssertionError(c.kind)
-            self.rec.send_columns(entity, indexes=idx, columns=columns)
-            self.rows_written += n
+            if not len(c):
+                continue
+            self._style(entity, c)
+            idx = [time_column(rr, "t", c.t_ns, epoch=bool(self._epoch)),
+                   rr.TimeColumn("step", sequence=np.asarray(c.step, dtype=np.int64)),
+                   time_column(rr, "arrival", c.arrival_ns, epoch=bool(self._arrival_epoch))]
+            self.rec.send_columns(entity, indexes=idx, columns=components(rr, c), strict=True)
+            self.rows_written += len(c)
+            self._written.add("/" + entity)
         self._pending = 0
+        self._send_blueprint()
         self._last_flush = time.monotonic()
 
+    def _style(self, entity: str, c: Column) -> None:
+        """Series names and colours, once per entity (static)."""
+        if entity in self._styled or "names" not in c.style:
+            return
+        self._styled.add(entity)
+        rr = self._rr
+        kw = {"names": list(c.style["names"]), "colors": [list(x) for x in c.style["colors"]]}
+        if c.style.get("points"):
+            self.rec.log(entity, rr.SeriesPoints(marker_sizes=[1.5] * len(kw["names"]), **kw), static=True)
+        else:
+            self.rec.log(entity, rr.SeriesLines(widths=list(c.style.get("widths", [2.0] * len(kw["names"]))), **kw),
+                         static=True)
+
+    def _send_blueprint(self) -> None:
+        """(Re)send the layout when the viewed tracks or the views holding data changed (a few
+        times per file: the number of viewed tracks and of their views is bounded)."""
+        viewed = self.rows.viewed_labels()
+        key = blueprint.layout_key(viewed=viewed, axes=self.rows.axes, written=self._written)
+        if key == self._layout_key:
+            return
+        self._layout_key = key
+        centre, extent = self.rows.scene()
+        self.rec.send_blueprint(blueprint.build(ndim=self.ndim, axes=self.rows.axes, viewed=viewed,
+                                                written=self._written, centre=centre, extent_m=extent))
+
     def close(self) -> None:
-        """Flush everything and finish the file (complete footer: `rerun rrd verify` passes)."""
+        """Flush everything, mark where viewed tracks end, and finish the file (complete footer)."""
         if self._closed:
             return
+        self.rows.mark_ends(self)
         self.flush()
         self.rec.flush()
         self.rec.disconnect()
@@ -380,48 +276,3 @@ class RerunSink:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
-
-    # ---- static content ------------------------------------------------------------------------
-    def _send_blueprint(self) -> None:
-        import rerun.blueprint as rrb
-
-        # Trails: everything up to the time cursor, so the view shows trajectories, not dots.
-        history = rrb.VisibleTimeRange("t", start=rrb.TimeRangeBoundary.infinite(),
-                                       end=rrb.TimeRangeBoundary.cursor_relative())
-        view = rrb.Spatial2DView if self.ndim <= 2 else rrb.Spatial3DView
-        world = view(origin="world", name="Trajectories", time_ranges=history)
-        bp = rrb.Blueprint(
-            rrb.Horizontal(
-                rrb.Vertical(world, rrb.TextLogView(origin="events", name="Events"), row_shares=[3, 1]),
-                rrb.Vertical(
-                    rrb.TimeSeriesView(origin="tracks", contents="$origin/*/state", name="State"),
-                    rrb.TimeSeriesView(origin="tracks", contents="$origin/*/std", name="Standard deviations"),
-                    rrb.TimeSeriesView(
-                        origin="tracks", contents=["$origin/*/nis", "$origin/*/nees"], name="NIS / NEES"
-                    ),
-                    rrb.TimeSeriesView(origin="tracks", contents="$origin/*/error", name="Error vs truth"),
-                ),
-                column_shares=[3, 2],
-            ),
-            collapse_panels=True,
-        )
-        self.rec.send_blueprint(bp)
-
-
-def _quat_xyzw(V: Array) -> Array:
-    """Quaternion (x, y, z, w) of a proper rotation matrix V."""
-    m = V
-    tr = m[0, 0] + m[1, 1] + m[2, 2]
-    if tr > 0:
-        s = 2.0 * np.sqrt(tr + 1.0)
-        return np.array([(m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s, 0.25 * s])
-    i = int(np.argmax(np.diagonal(m)))
-    j, k = (i + 1) % 3, (i + 2) % 3
-    s = 2.0 * np.sqrt(1.0 + m[i, i] - m[j, j] - m[k, k])
-    q = np.empty(4)
-    q[i] = 0.25 * s
-    q[j] = (m[j, i] + m[i, j]) / s
-    q[k] = (m[k, i] + m[i, k]) / s
-    q[3] = (m[k, j] - m[j, k]) / s
-    return q
-

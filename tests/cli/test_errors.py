@@ -51,7 +51,7 @@ def _file_cases(tmp: Path) -> dict[str, tuple[list[str], str]]:
     (tmp / "empty.rrd").write_bytes(b"")
     return {
         "inspect-missing": (["fusion", "inspect", "missing.rrd"], r"missing\.rrd: no such recording; fusion demo"),
-        "inspect-folder": (["fusion", "inspect", "folder"], r"folder: is a folder, not a recording"),
+        "inspect-folder": (["fusion", "inspect", "folder"], r"folder: no recordings found"),  # a folder is a set
         "inspect-stream": (["fusion", "inspect", "a.fstream"], r"input stream.*fusion replay a\.fstream"),
         "inspect-text": (["fusion", "inspect", "notes.txt"], r"not a Rerun recording"),
         "inspect-empty": (["fusion", "inspect", "empty.rrd"], r"empty\.rrd: the file is empty"),

@@ -41,7 +41,9 @@ def test_tracks_table() -> None:
     lines = text.splitlines()
     assert lines[0] == "namespace 'demo': 2 confirmed tracks (model cv, latest estimate of each)"
     assert lines[1].split() == ["track", "time", "x", "vx", "y", "vy", "pos", "std", "sensor", "NIS"]
-    assert lines[2].split() == ["3", "2.500", "s", "-5.00", "1.00", "2.00", "-1.00", "3.00", "cam1", "1.50"]
+    from fusion.io.labels import short_id
+
+    assert lines[2].split() == [short_id(3), "2.500", "s", "-5.00", "1.00", "2.00", "-1.00", "3.00", "cam1", "1.50"]
     assert format_tracks(m.Snapshot(estimates=[]), "x") == "namespace 'x': no confirmed tracks right now"
 
 

@@ -44,3 +44,34 @@ def latest(results: list[StepResult]) -> dict[tuple[int, int, str], Estimate]:
             else:
                 out[k] = e
     return out
+
+
+def record_scenario(name: str, path, *, duration_s: float | None = None, sink_factory=None):  # noqa: ANN001, ANN201
+    """The reference scenario `name` (configs/scenarios/<name>.toml) as the service runs it: its
+    stream of samples (measurements and truth) through the Pipeline with a RerunSink writing
+    `path`. Returns the pipeline (its tracker and counts) after the sink is closed."""
+    import msgspec
+
+    from fusion.io import wire
+    from fusion.io.rerun_sink import RerunSink
+    from fusion.pipeline import Pipeline
+    from publishers.spec import load_scenario_file, scenario_path
+    from publishers.stream import build_stream
+
+    sf = load_scenario_file(scenario_path(name))
+    spec = sf.scenario if duration_s is None else msgspec.structs.replace(sf.scenario, duration_s=duration_s)
+    samples, _ = build_stream(spec, namespace=sf.service.namespace)
+    tracker = Tracker(sf.service.tracker)
+    pipe: Pipeline | None = None
+    sink = RerunSink(path, recording_id=name, layout=tracker.layout, position_indices=tracker.position_indices,
+                     velocity_indices=tracker.velocity_indices, meta={"scenario": name},
+                     counts=lambda: pipe.counts().flat())  # type: ignore[union-attr]
+    pipe = Pipeline(tracker, wire.Codec(sf.service.namespace), sink=sink)
+    records = [(s.arrival_ns, s.key, s.payload) for s in samples]
+    try:
+        for i in range(0, len(records), 50):
+            pipe.ingest(records[i:i + 50])
+    finally:
+        sink.close()
+        pipe.warn.flush()  # its held-back warnings now, not in another test's flush_all
+    return pipe

@@ -73,10 +73,13 @@ def test_reference_scenario_end_to_end(name: str, tmp_path: Path) -> None:
     rows = rrd_rows(tmp_path / "live.rrd")
     (tid,) = confirmed
     n = sum(1 for e in got if e.track_id == tid and e.status == "confirmed")
-    for entity in (f"/world/tracks/{tid}", f"/world/tracks/{tid}/cov", f"/tracks/{tid}/state", f"/tracks/{tid}/std"):
+    from fusion.io.labels import short_id
+
+    lab = short_id(tid)
+    for entity in (f"/world/tracks/{lab}/now", f"/world/tracks/{lab}/cov", f"/tracks/{lab}/std"):
         assert rows[entity] == n, entity
-    assert rows[f"/tracks/{tid}/nis"] == sum(1 for e in got if e.track_id == tid and e.nis is not None)
-    assert rows[f"/tracks/{tid}/nees"] > 0.9 * n, "estimates were not scored against the truth"
+    assert rows[f"/tracks/{lab}/nis"] == sum(1 for e in got if e.track_id == tid and e.nis is not None)
+    assert rows[f"/tracks/{lab}/nees"] > 0.9 * n, "estimates were not scored against the truth"
     assert rows["/events"] > 0
     v = subprocess.run([str(RERUN), "rrd", "verify", str(tmp_path / "live.rrd")], capture_output=True, text=True,
                        timeout=60)

@@ -1,0 +1,134 @@
+"""What a recording shows, derived from the tracker's estimates with stacked numpy (no rerun here).
+
+Scoring against truth, for n estimates stacked as X (n, d), P (n, d, d):
+- a truth state at the same t_ns is matched to an estimate when it is the nearest true target in
+  position and within MATCH_D2 in squared Mahalanobis distance of the position block;
+- error e = x - x_true (every component), and its +-2 sigma band 2 sqrt(P_ii);
+- NEES over the kinematic components k (position and velocity, which every motion model and the
+  truth share): e_k' P_kk^-1 e_k, chi-square with len(k) degrees of freedom for a consistent filter.
+  Components such as an IMM turn rate are left out: the truth defines them only as a model-free
+  by-product and the models disagree on them.
+- 95 % bounds of NIS (m = measurement dimension) and NEES: the two-sided chi-square quantiles
+  chi2.ppf(0.025, m), chi2.ppf(0.975, m).
+- Kalman gain K = P- H' S^-1 (prior covariance, measurement Jacobian, innovation covariance).
+- OSPA / GOSPA (fusion.core.metrics, order 2, cut-off OSPA_C_M) per scan time: the positions of the
+  confirmed tracks updated at that time against the truth positions at that time.
+"""
+
+from __future__ import annotations
+
+from functools import cache
+
+import numpy as np
+from scipy.spatial import cKDTree
+from scipy.stats import chi2
+
+from fusion.core.checks import Array
+from fusion.core.metrics import gospa, ospa
+
+MATCH_D2 = 100.0
+OSPA_C_M = 10.0
+_CIRCLE = np.stack([np.cos(np.linspace(0, 2 * np.pi, 33)), np.sin(np.linspace(0, 2 * np.pi, 33))], axis=1)
+
+
+@cache
+def chi2_bounds(dof: int) -> tuple[float, float]:
+    """Two-sided 95 % interval of a chi-square variable with `dof` degrees of freedom."""
+    return float(chi2.ppf(0.025, dof)), float(chi2.ppf(0.975, dof))
+
+
+def ellipse_points(mean: Array, cov: Array, *, n_sigma: float = 2.0) -> Array:
+    """Points of the n-sigma ellipse of 2-D Gaussians: mean + n L u for u on the unit circle,
+    L L' = cov. mean (..., 2), cov (..., 2, 2) -> (..., 33, 2)."""
+    w, V = np.linalg.eigh(0.5 * (cov + np.swapaxes(cov, -1, -2)))
+    L = V * np.sqrt(np.clip(w, 0.0, None))[..., None, :]
+    return mean[..., None, :] + n_sigma * _CIRCLE @ np.swapaxes(L, -1, -2)
+
+
+def world(p: Array) -> Array:
+    """Positions (..., 1|2|3) as 3-D world points: 1-D on the x axis, 2-D in the z = 0 plane."""
+    p = np.asarray(p, dtype=np.float64)
+    if p.shape[-1] == 3:
+        return p
+    pad = np.zeros((*p.shape[:-1], 3 - p.shape[-1]))
+    return np.concatenate([p, pad], axis=-1)
+
+
+def ellipsoid_axes(cov: Array) -> tuple[Array, Array]:
+    """2-sigma half sizes (n, 3) and rotation quaternions (x, y, z, w) (n, 4) of 3-D covariances."""
+    w, V = np.linalg.eigh(0.5 * (cov + np.swapaxes(cov, -1, -2)))
+    V = V.copy()
+    flip = np.linalg.det(V) < 0
+    V[flip, :, 0] = -V[flip, :, 0]
+    return 2.0 * np.sqrt(np.clip(w, 0.0, None)), quaternions(V)
+
+
+def quaternions(R: Array) -> Array:
+    """Quaternions (x, y, z, w) of proper rotation matrices R (n, 3, 3) (Shepperd's method)."""
+    R = np.asarray(R)
+    q = np.empty((R.shape[0], 4))
+    for i, m in enumerate(R):
+        tr = m[0, 0] + m[1, 1] + m[2, 2]
+        if tr > 0:
+            s = 2.0 * np.sqrt(tr + 1.0)
+            q[i] = [(m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s, 0.25 * s]
+            continue
+        a = int(np.argmax(np.diagonal(m)))
+        b, c = (a + 1) % 3, (a + 2) % 3
+        s = 2.0 * np.sqrt(1.0 + m[a, a] - m[b, b] - m[c, c])
+        q[i, a] = 0.25 * s
+        q[i, b] = (m[b, a] + m[a, b]) / s
+        q[i, c] = (m[c, a] + m[a, c]) / s
+        q[i, 3] = (m[c, b] - m[b, c]) / s
+    return q
+
+
+def match_truth(t_ns: Array, X: Array, P: Array, truth: dict[int, dict[str, Array]], pi: list[int]
+                ) -> tuple[Array, Array, list[str]]:
+    """(row indices, true states (k, d), target ids) of the estimates matched to a truth target."""
+    idx: list[int] = []
+    states: list[Array] = []
+    names: list[str] = []
+    t_list = t_ns.tolist()
+    order = np.argsort(t_ns, kind="stable")
+    i = 0
+    while i < len(order):
+        t = t_list[order[i]]
+        j = i
+        while j < len(order) and t_list[order[j]] == t:
+            j += 1
+        rows = order[i:j]
+        i = j
+        T = truth.get(t)
+        if not T:
+            continue
+        ids = sorted(T)
+        C = np.stack([T[k] for k in ids])
+        if C.shape[1] != X.shape[1]:
+            continue
+        if len(ids) > 16:  # nearest true target by a k-d tree: O(k log j), not the k x j distances
+            best = cKDTree(C[:, pi]).query(X[rows][:, pi])[1]
+        else:
+            best = np.argmin(np.sum((X[rows][:, None, pi] - C[None, :, pi]) ** 2, axis=2), axis=1)
+        dp = X[rows][:, pi] - C[best][:, pi]
+        Pp = P[rows][:, pi][:, :, pi]
+        d2 = np.einsum("ij,ij->i", dp, np.linalg.solve(Pp, dp[..., None])[..., 0])
+        ok = d2 < MATCH_D2
+        idx.extend(rows[ok].tolist())
+        states.extend(C[best[ok]])
+        names.extend(ids[b] for b in best[ok].tolist())
+    o = np.argsort(idx, kind="stable")
+    return (np.asarray(idx, dtype=np.int64)[o], np.stack(states)[o] if states else np.empty((0, X.shape[1])),
+            [names[k] for k in o])
+
+
+def nees(E: Array, P: Array, ki: list[int]) -> Array:
+    """e_k' P_kk^-1 e_k per row, over the components ki."""
+    e = E[:, ki]
+    Pk = P[:, ki][:, :, ki]
+    return np.einsum("ij,ij->i", e, np.linalg.solve(Pk, e[..., None])[..., 0])
+
+
+def set_distances(points: Array, truth_points: Array) -> tuple[float, float]:
+    """(OSPA, GOSPA) between estimated and true positions, order 2, cut-off OSPA_C_M metres."""
+    return ospa(points, truth_points, c=OSPA_C_M), gospa(points, truth_points, c=OSPA_C_M)

@@ -1,0 +1,276 @@
+"""The rows a flush derives from the kept estimates (see fusion.io.rerun_sink for the layout and
+fusion.io.derive for the math): the all-track data of record, the trails, and the time series of
+the viewed tracks. Stacked numpy over all estimates of a flush; the per-track work is bounded by
+the number of viewed tracks (MAX_VIEWED)."""
+
+from __future__ import annotations
+
+from collections import defaultdict
+from typing import Any
+
+import numpy as np
+
+from fusion.core.checks import Array
+from fusion.io import derive
+from fusion.io.labels import short_id
+from fusion.io.palette import colour, series_colours
+from fusion.tracking.results import Estimate
+
+OSPA_EVERY_NS = 1_000_000_000  # OSPA / GOSPA at most once per second of sensor time
+OSPA_MAX_POINTS = 300  # and for scenes of at most this many tracks and targets (the assignment is cubic)
+MAX_VIEWED = 6  # tracks with views of their own: the first confirmed ones
+TRUTH_KEPT = 100_000  # truth times kept for scoring (the oldest half dropped past this)
+
+
+class Rows:
+    """State that outlives one flush: truth, the viewed tracks, the scene's extent."""
+
+    def __init__(self, layout: tuple[str, ...], pi: list[int], vi: list[int]) -> None:
+        self.layout = layout
+        self.pi = pi
+        self.ki = sorted(set(pi) | set(vi))  # kinematic components: what NEES is computed over
+        self.axes = [layout[i] for i in pi]
+        self.truth: dict[int, dict[str, Array]] = defaultdict(dict)
+        self.viewed: dict[int, str] = {}  # track id -> label, in order of confirmation
+        self._last: dict[int, tuple[int, int, int, Array]] = {}  # viewed track -> newest (t, step, arrival, world)
+        self._lo = np.full(3, np.inf)
+        self._hi = np.full(3, -np.inf)
+        self._next_ospa = -(2**62)
+        self.newest_truth_ns: int | None = None
+
+    def continue_from(self, other: Rows) -> None:
+        self.truth.update(other.truth)
+        self.viewed = dict(other.viewed)
+        self._last = dict(other._last)
+        self._lo, self._hi, self._next_ospa = other._lo.copy(), other._hi.copy(), other._next_ospa
+        self.newest_truth_ns = other.newest_truth_ns
+
+    def viewed_labels(self) -> list[str]:
+        return list(self.viewed.values())
+
+    def scene(self) -> tuple[list[float], float]:
+        """Centre and half extent (m) of what was seen so far (origin and 10 m before any data)."""
+        if not np.all(np.isfinite(self._lo)):
+            return [0.0, 0.0, 0.0], 10.0
+        return list((self._lo + self._hi) / 2), float(max(np.max(self._hi - self._lo) / 2, 1.0))
+
+    def add_truth(self, target_id: str, t_ns: int, state: Array) -> Array:
+        s = np.asarray(state, dtype=np.float64)
+        self.truth[t_ns][target_id] = s
+        if self.newest_truth_ns is None or t_ns > self.newest_truth_ns:
+            self.newest_truth_ns = t_ns
+        if len(self.truth) > TRUTH_KEPT:
+            for k in sorted(self.truth)[: TRUTH_KEPT // 2]:
+                del self.truth[k]
+        return s
+
+    # ---- one flush -------------------------------------------------------------------------------
+    def derive(self, est: list[tuple[Estimate, int, int]], sink: Any) -> None:
+        retracted = [r for r in est if r[0].status == "retracted"]
+        live = [r for r in est if r[0].status != "retracted"]
+        rec = sink.col("record/estimates", "record")
+        d = len(self.layout)
+        for e, arr, step in retracted:  # x, std, error: NaN rows
+            nan = np.full((1, d), np.nan)
+            rec.extend([e.t_ns], [step], [arr], blocks={"x": nan, "std": nan, "error": nan}, track=[e.track_id],
+                       label=[short_id(e.track_id)], sensor=[e.sensor_id], seq=[e.seq], status=[e.status],
+                       revision=[e.revision], nis=[np.nan], nis_dof=[0], nees=[np.nan], nees_dof=[0], target=[""])
+        if not live:
+            return
+        E_ = [r[0] for r in live]
+        t = np.array([e.t_ns for e in E_], dtype=np.int64)
+        arr = np.array([r[1] for r in live], dtype=np.int64)
+        step = np.array([r[2] for r in live], dtype=np.int64)
+        X = np.stack([e.x for e in E_])
+        P = np.stack([e.P for e in E_])
+        std = np.sqrt(np.clip(np.diagonal(P, axis1=1, axis2=2), 0.0, None))
+        n = len(E_)
+        m_idx, TX, targets = derive.match_truth(t, X, P, self.truth, self.pi)
+        err = np.full(X.shape, np.nan)
+        err[m_idx] = X[m_idx] - TX
+        nees = np.full(n, np.nan)
+        if m_idx.size:
+            nees[m_idx] = derive.nees(err[m_idx], P[m_idx], self.ki)
+        target = [""] * n
+        for i, name in zip(m_idx.tolist(), targets, strict=True):
+            target[i] = name
+        matched = np.zeros(n, dtype=bool)
+        matched[m_idx] = True
+        nis = np.array([np.nan if e.nis is None else e.nis for e in E_])
+        nis_dof = np.array([0 if e.y is None else e.y.shape[0] for e in E_], dtype=np.int64)
+        ids = [e.track_id for e in E_]
+        status = [e.status for e in E_]
+        rec.extend(t, step, arr, track=ids, label=[short_id(i) for i in ids], sensor=[e.sensor_id for e in E_],
+                   seq=[e.seq for e in E_], status=status, revision=[e.revision for e in E_],
+                   blocks={"x": X, "std": std, "error": err}, nis=nis.tolist(), nis_dof=nis_dof.tolist(),
+                   nees=nees.tolist(), nees_dof=np.where(matched, len(self.ki), 0).tolist(), target=target)
+        W = derive.world(X[:, self.pi])
+        conf = np.array([s == "confirmed" for s in status])
+        for mask, entity, role, radius in ((conf, "world/estimates", "estimate", -2.0),
+                                           (~conf, "world/tentative", "tentative", -1.5)):
+            if mask.any():
+                sink.col(entity, "points", rgba=colour(role), radius=radius).extend(
+                    t[mask], step[mask], arr[mask], p=list(W[mask][:, None, :]))
+        if conf.any():
+            self._lo = np.minimum(self._lo, W[conf].min(axis=0))
+            self._hi = np.maximum(self._hi, W[conf].max(axis=0))
+        for i in np.flatnonzero(conf).tolist():
+            if len(self.viewed) >= MAX_VIEWED:
+                break
+            if ids[i] not in self.viewed:
+                self.viewed[ids[i]] = short_id(ids[i])
+        rows_of: dict[int, list[int]] = defaultdict(list)
+        for i, tid in enumerate(ids):  # a viewed track's confirmed rows (a flush's cut must not matter)
+            if tid in self.viewed and conf[i]:
+                rows_of[tid].append(i)
+        cols = _Stacked(t, step, arr, X, P, std, err, matched, nees, TX_full(TX, m_idx, X.shape), W)
+        for tid in sorted(rows_of, key=list(self.viewed).index):
+            self._track(sink, tid, np.array(rows_of[tid]), [E_[i] for i in rows_of[tid]], cols)
+        self._set_distances(sink, t, step, arr, W, conf, ids)
+
+    def _set_distances(self, sink: Any, t: Array, step: Array, arr: Array, W: Array, conf: Array,
+                       ids: list[int]) -> None:
+        """OSPA and GOSPA at the first scan time with truth in each OSPA_EVERY_NS."""
+        for tt in sorted(set(t[conf].tolist())):
+            if tt < self._next_ospa or not self.truth.get(tt) or len(self.truth[tt]) > OSPA_MAX_POINTS:
+                continue
+            self._next_ospa = tt + OSPA_EVERY_NS
+            at = np.flatnonzero(conf & (t == tt))
+            last = {ids[i]: i for i in at.tolist()}  # the newest row of each track at that time
+            pts = W[sorted(last.values())][:, : len(self.pi)]
+            T = self.truth[tt]
+            truth_pts = np.stack([T[k][self.pi] for k in sorted(T)])
+            o, g = derive.set_distances(pts, truth_pts)
+            i0 = int(at[0])
+            for name, v in (("ospa", o), ("gospa", g)):
+                sink.col(f"metrics/{name}", "scalars", width=1, names=[name.upper()],
+                         colors=[colour("nees" if name == "ospa" else "nis")]).add(
+                    int(t[i0]), int(step[i0]), int(arr[i0]), v=[v])
+
+    def _track(self, sink: Any, tid: int, rows: Array, es: list[Estimate], c: _Stacked) -> None:
+        """The time series and cursor entities of one viewed track."""
+        lab = self.viewed[tid]
+        base = f"tracks/{lab}"
+        t, step, arr = c.t[rows], c.step[rows], c.arr[rows]
+        prior = np.stack([c.X[r] if e.prior_x is None else e.prior_x for r, e in zip(rows.tolist(), es, strict=True)])
+        mt = c.matched[rows]
+        for a, i in enumerate(self.pi):
+            ax = self.axes[a]
+            sink.col(f"{base}/position/{ax}/estimate", "scalars", width=2, names=["estimate", "prediction"],
+                     colors=[colour("estimate"), colour("prediction")]).extend(
+                t, step, arr, v=list(np.column_stack([c.X[rows, i], prior[:, i]])))
+            if mt.any():
+                sink.col(f"{base}/position/{ax}/truth", "scalars", width=1, names=["truth"],
+                         colors=[colour("truth")]).extend(t[mt], step[mt], arr[mt], v=list(c.TX[rows][mt][:, i:i + 1]))
+                e_ = c.err[rows][mt][:, i]
+                s_ = 2.0 * c.std[rows][mt][:, i]
+                sink.col(f"{base}/error/{ax}", "scalars", width=3, names=["error", "+2 sigma", "-2 sigma"],
+                         colors=[colour("estimate"), colour("bound"), colour("bound")]).extend(
+                    t[mt], step[mt], arr[mt], v=list(np.column_stack([e_, s_, -s_])))
+            meas = [k for k, e in enumerate(es) if e.meas_pos is not None]
+            if meas:
+                sink.col(f"{base}/position/{ax}/measurement", "scalars", width=1, names=["associated measurement"],
+                         colors=[colour("associated")], points=True).extend(
+                    t[meas], step[meas], arr[meas], v=[[float(es[k].meas_pos[a])] for k in meas])  # type: ignore[index]
+        if mt.any():
+            lo, hi = derive.chi2_bounds(len(self.ki))
+            nv = c.nees[rows][mt]
+            sink.col(f"{base}/nees", "scalars", width=3, names=[f"NEES (n={len(self.ki)})", "2.5 %", "97.5 %"],
+                     colors=[colour("nees"), colour("bound"), colour("bound")]).extend(
+                t[mt], step[mt], arr[mt], v=list(np.column_stack([nv, np.full_like(nv, lo), np.full_like(nv, hi)])))
+        d = len(self.layout)
+        sink.col(f"{base}/std", "scalars", width=d, names=[f"sigma {x}" for x in self.layout],
+                 colors=series_colours(d)).extend(t, step, arr, v=list(c.std[rows]))
+        self._update_parts(sink, base, es, t, step, arr)
+        self._cursor(sink, tid, lab, rows, es, c)
+
+    def _update_parts(self, sink: Any, base: str, es: list[Estimate], t: Array, step: Array, arr: Array) -> None:
+        """NIS with its bounds, innovation with +-2 sqrt(diag S) and Kalman gain, per sensor
+        (stacked: one batched solve per sensor), and IMM mode probabilities."""
+        d = len(self.layout)
+        by_sensor: dict[str, list[int]] = defaultdict(list)
+        for k, e in enumerate(es):
+            if e.y is not None and e.S is not None and e.nis is not None:
+                by_sensor[e.sensor_id].append(k)
+        for sensor, ks in sorted(by_sensor.items()):
+            sel = np.array(ks)
+            Y = np.stack([es[k].y for k in ks])  # type: ignore[misc]
+            S = np.stack([es[k].S for k in ks])  # type: ignore[misc]
+            m = Y.shape[1]
+            lo, hi = derive.chi2_bounds(m)
+            nis = np.array([es[k].nis for k in ks], dtype=np.float64)
+            sink.col(f"{base}/nis", "scalars", width=3, names=[f"NIS (m={m})", "2.5 %", "97.5 %"],
+                     colors=[colour("nis"), colour("bound"), colour("bound")]).extend(
+                t[sel], step[sel], arr[sel], v=list(np.column_stack([nis, np.full_like(nis, lo), np.full_like(nis, hi)])))
+            s2 = 2.0 * np.sqrt(np.clip(np.diagonal(S, axis1=1, axis2=2), 0.0, None))
+            names = [f"y{j}" for j in range(m)] + [f"+2 sqrt S{j}{j}" for j in range(m)] + \
+                    [f"-2 sqrt S{j}{j}" for j in range(m)]
+            sink.col(f"{base}/innovation/{sensor}", "scalars", width=3 * m, names=names,
+                     colors=series_colours(m) + [colour("bound")] * 2 * m).extend(
+                t[sel], step[sel], arr[sel], v=list(np.concatenate([Y, s2, -s2], axis=1)))
+            kg = [k for k in ks if es[k].H is not None and es[k].prior_P is not None]
+            if kg:
+                gs = np.array(kg)
+                H = np.stack([es[k].H for k in kg])  # type: ignore[misc]
+                Pm = np.stack([es[k].prior_P for k in kg])  # type: ignore[misc]
+                Sg = np.stack([es[k].S for k in kg])  # type: ignore[misc]
+                K = np.swapaxes(np.linalg.solve(Sg, H @ Pm), 1, 2)  # P- H' S^-1, S symmetric
+                sink.col(f"{base}/gain/{sensor}", "scalars", width=d * m,
+                         names=[f"K[{x},{j}]" for x in self.layout for j in range(m)],
+                         colors=series_colours(d * m)).extend(t[gs], step[gs], arr[gs], v=list(K.reshape(len(kg), -1)))
+        mk = [k for k, e in enumerate(es) if e.mode_probabilities is not None]
+        if mk:
+            mu = np.stack([es[k].mode_probabilities for k in mk])  # type: ignore[misc]
+            sel = np.array(mk)
+            sink.col(f"{base}/mode", "scalars", width=mu.shape[1], names=[f"model {j}" for j in range(mu.shape[1])],
+                     colors=series_colours(mu.shape[1])).extend(t[sel], step[sel], arr[sel], v=list(mu))
+
+    def _cursor(self, sink: Any, tid: int, lab: str, rows: Array, es: list[Estimate], c: _Stacked) -> None:
+        """Labelled point and 2-sigma ellipse at the cursor; a start marker at the first row."""
+        t, step, arr = c.t[rows], c.step[rows], c.arr[rows]
+        W = c.W[rows]
+        w = f"world/tracks/{lab}"
+        if tid not in self._last:
+            sink.col(f"{w}/start", "points", rgba=colour("start"), radius=-6.0).add(
+                int(t[0]), int(step[0]), int(arr[0]), p=W[:1])  # green: the colour says start, no text to clutter
+        self._last[tid] = (int(t[-1]), int(step[-1]), int(arr[-1]), W[-1].copy())
+        sink.col(f"{w}/now", "points", rgba=colour("estimate"), radius=-5.0, show_labels=True).extend(
+            t, step, arr, p=list(W[:, None, :]), label=[[lab]] * len(rows))
+        Pp = c.P[rows][:, self.pi][:, :, self.pi]
+        pos = c.X[rows][:, self.pi]
+        if len(self.pi) == 3:
+            half, quat = derive.ellipsoid_axes(Pp)
+            sink.col(f"{w}/cov", "ellipsoids", rgba=colour("covariance")).extend(
+                t, step, arr, c=list(pos), h=list(half), q=list(quat))
+            return
+        if len(self.pi) == 2:
+            strips = derive.world(derive.ellipse_points(pos, Pp))
+        else:
+            half = 2.0 * np.sqrt(Pp[:, 0, 0])
+            strips = derive.world(np.stack([pos - half[:, None], pos + half[:, None]], axis=1))
+        sink.col(f"{w}/cov", "strips", rgba=colour("covariance")).extend(t, step, arr, s=list(strips))
+
+    def mark_ends(self, sink: Any) -> None:
+        """An end marker at the newest position of every viewed track (at close)."""
+        for tid, (t, step, arr, w) in sorted(self._last.items()):
+            lab = self.viewed[tid]
+            sink.col(f"world/tracks/{lab}/end", "points", rgba=colour("end"), radius=-6.0).add(
+                t, step, arr, p=w[None, :])
+
+
+class _Stacked:
+    """The stacked arrays of one flush's live estimates."""
+
+    __slots__ = ("P", "TX", "W", "X", "arr", "err", "matched", "nees", "std", "step", "t")
+
+    def __init__(self, t: Array, step: Array, arr: Array, X: Array, P: Array, std: Array, err: Array,
+                 matched: Array, nees: Array, TX: Array, W: Array) -> None:
+        self.t, self.step, self.arr, self.X, self.P, self.std = t, step, arr, X, P, std
+        self.err, self.matched, self.nees, self.TX, self.W = err, matched, nees, TX, W
+
+
+def TX_full(TX: Array, idx: Array, shape: tuple[int, ...]) -> Array:  # noqa: N802 - the textbook letter
+    """Matched true states scattered to the rows they belong to (NaN elsewhere)."""
+    out = np.full(shape, np.nan)
+    out[idx] = TX
+    return out
