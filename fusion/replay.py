@@ -107,7 +107,8 @@ def replay(stream: str | Path, *, config: str | Path | None = None, out: str | P
         if hist is not None:
             sm = smooth_tracks(hist, tracker)
             if sink is not None:
-                log_smoothed(sink.rec, sm.tracks, tracker.layout)
+                sink.flush()  # the recording's time kinds are settled by its first rows
+                log_smoothed(sink.rec, sm.tracks, tracker.layout, epoch=sink.epoch_time)
                 for tid, why in sm.failed:
                     sink.log_text(tracker.now_ns or 0, f"track {tid} not smoothed: {why}", "WARN")
     finally:

@@ -65,6 +65,15 @@ def format_status(st: m.ServiceStatus, namespace: str) -> str:
         f"  queue      {st.queue_depth} waiting",
         "  recording  " + (f"{st.recording} ({size(st.recording_bytes)})" if st.recording else "off"),
     ]
+    if st.recording_error:
+        lines.append(f"  recording  FAILED: {st.recording_error} (tracking and publishing go on)")
+    if (cp := st.checkpoint) is not None:
+        resumed = (f"resumed {cp.resumed_tracks} tracks from a checkpoint {duration(cp.resumed_age_s)} old"
+                   if cp.resumed_age_s is not None else "started with no checkpoint")
+        refused = f"; one found at start was refused: {cp.refused}" if cp.refused else ""
+        last = (f"; last written {duration(cp.last_written_age_s)} ago" if cp.last_written_age_s is not None else "")
+        err = f"; the last write FAILED: {cp.error}" if cp.error else ""
+        lines.append(f"  checkpoint {cp.path}: {resumed}{refused}; {cp.written} written{last}{err}")
     if st.zenoh is not None:
         z = st.zenoh
         again = f", {z.reconnects} reconnects" if z.reconnects else ""

@@ -107,6 +107,13 @@ class RerunSink:
     def _time_kinds(self) -> tuple[bool | None, bool | None]:
         return self._epoch, self._arrival_epoch
 
+    @property
+    def epoch_time(self) -> bool | None:
+        """Whether the `t` timeline holds epoch timestamps (True) or durations from the stream's
+        start (False); None until the first rows are written. Anything else logged on `t`
+        (fusion.io.smoothed) must use the same kind: Rerun keeps one type per timeline."""
+        return self._epoch
+
     def steps(self) -> int:
         """Tracker steps logged so far (continued across a rotated set)."""
         return self._step

@@ -52,7 +52,7 @@ def detection_of(msg: m.Measurement, arrival_ns: int | None = None) -> Detection
         z = np.array(vals, dtype=np.float64)
         if d.has_noise:
             R = diagonal_R(tuple(std))  # type: ignore[arg-type]
-    return Detection(msg.sensor_id, msg.t_ns, msg.seq, z, R, arrival_ns, msg.epoch)
+    return Detection(msg.sensor_id, msg.t_ns, msg.seq, z, R, arrival_ns, msg.epoch, not isinstance(d, m.Cartesian))
 
 
 _DIAGONALS: dict[tuple[float, ...], np.ndarray] = {}

@@ -32,7 +32,8 @@ class Detection:
     [range_m, bearing_rad, range_rate_mps]; radar (3-D): [range_m, azimuth_rad, elevation_rad]
     with an optional range rate last. R is the noise covariance; None takes the sensor's default.
     arrival_ns: when it arrived (the intake's clock), None when unknown. epoch: the publisher's
-    boot id (0: none given); (sensor_id, epoch, seq, t_ns) identifies a measurement.
+    boot id (0: none given); (sensor_id, epoch, seq, t_ns) identifies a measurement. radar_data:
+    the kind of data the message carried (None: not said), checked against the sensor's kind.
     """
 
     sensor_id: str
@@ -42,6 +43,7 @@ class Detection:
     R: Array | None = None
     arrival_ns: int | None = None
     epoch: int = 0
+    radar_data: bool | None = None  # what the producer says z is: range/bearing (True), a position (False)
 
     @property
     def key(self) -> tuple[int, str, int]:

@@ -138,6 +138,9 @@ class Intake:
             return d, _no(d, Reason.UNKNOWN_SENSOR, f"sensor {d.sensor_id!r} is not configured")
         if not isinstance(d.t_ns, int) or not isinstance(d.seq, int) or d.seq < 0:
             return d, _no(d, Reason.INVALID, "t_ns and seq must be integers, seq >= 0")
+        if d.radar_data is not None and d.radar_data != sm.is_radar:
+            return d, _no(d, Reason.INVALID, f"sensor {d.sensor_id} is {'a radar' if sm.is_radar else 'not a radar'}; "
+                          f"this message carries {'radar' if d.radar_data else 'Cartesian'} data")
         z = d.z
         if z.ndim != 1 or z.shape[0] not in sm.by_dim:
             return d, _no(d, Reason.INVALID,
@@ -155,18 +158,36 @@ class Intake:
             if R is None:
                 return d, _no(d, Reason.INVALID, f"no noise: the message carries none and sensor {d.sensor_id} "
                               "has no default in the configuration")
-            return Detection(d.sensor_id, d.t_ns, d.seq, z, R, d.arrival_ns, d.epoch), None
+            return self._placed(Detection(d.sensor_id, d.t_ns, d.seq, z, R, d.arrival_ns, d.epoch), sm, zl, R)
         if self._valid_R.get((d.sensor_id, m)) is R:
-            return d, None
+            return self._placed(d, sm, zl, R)
         if _positive_diagonal(R, m):
             if not R.flags.writeable and R.base is None:  # nobody can change it: remember it
                 self._valid_R[(d.sensor_id, m)] = R
-            return d, None
+            return self._placed(d, sm, zl, R)
         try:
             R = as_covariance("R", R, m)
         except InputError as e:
             return d, _no(d, Reason.BAD_COVARIANCE, str(e))
-        return Detection(d.sensor_id, d.t_ns, d.seq, z, R, d.arrival_ns, d.epoch), None
+        return self._placed(Detection(d.sensor_id, d.t_ns, d.seq, z, R, d.arrival_ns, d.epoch), sm, zl, R)
+
+    @staticmethod
+    def _placed(d: Detection, sm: SensorModel, zl: list[float], R: np.ndarray) -> tuple[Detection, Refusal | None]:
+        """A radar return must place the target well enough to start a track: its position
+        covariance J R J' has the variance R_rr along the line of sight and r^2 R_bb (and r^2 R_ee)
+        across it, and a ratio of these over 1e12 (or a square that over- or underflows) makes a
+        new track's covariance numerically singular. Cartesian data are R itself, checked above."""
+        if not sm.is_radar:
+            return d, None
+        r2 = zl[0] * zl[0]
+        d2 = R.diagonal().tolist()
+        v = [d2[0], *(r2 * d2[k] for k in range(1, sm.ndim))]  # range, then the ndim - 1 angles
+        lo, hi = min(v), max(v)
+        if lo > 0.0 and hi < math.inf and hi <= 1e12 * lo:
+            return d, None
+        return d, _no(d, Reason.BAD_COVARIANCE, f"range {zl[0]:.6g} m with this noise places the target with "
+                      f"variances {lo:.3g} to {hi:.3g} m^2 across and along the line of sight: too ill-conditioned "
+                      "to start a track")
 
 
 def _positive_diagonal(R: np.ndarray, m: int) -> bool:

@@ -45,7 +45,7 @@ class Outcome(StrEnum):
 
     UPDATED = "updated"  # it updated a track
     BORN = "born"  # it started a track
-    UNASSIGNED = "unassigned"  # it fell in a gate but another measurement won the track
+    UNASSIGNED = "unassigned"  # it fell in a gate, no track took it, and max_tracks left no room for a new one
     CAPACITY = "capacity"  # no track could be started: max_tracks reached
 
 
@@ -152,7 +152,8 @@ class Counts:
     inputs: control inputs; duplicates are refused with reason "duplicate"; truth samples are
     counted by the pipeline, 0 in a bare tracker).
     What the data did (a function of the accepted measurements, whatever their arrival order):
-    updates, births, births_refused_capacity, unassigned, confirmations, deletions by reason,
+    updates, births, births_refused_capacity, unassigned (in a gate, taken by no track; such a
+    measurement starts a track like any other), confirmations, deletions by reason,
     numerical_skips. How the data arrived: replays (calls that rewound), replayed_scans (scans
     run again), rescans (a newest scan run again with more measurements), late_applied
     (measurements that landed before the newest scan).

@@ -3,10 +3,11 @@ the scan's detections to the new track set and what happened.
 
   1. gate: constant-velocity coarse gate (fusion.core.association.coarse_pairs), then the fine
      gate of fusion.tracking.gating (NIS <= chi2_m(probability)), cost = NIS + ln det S;
-  2. assign, confirmed tracks first: GNN over the confirmed tracks' pairs, then GNN over the
-     tentative tracks' pairs with the measurements left (the initiator gets leftovers, as in
-     Stone Soup's tracker), so a tentative track never takes a confirmed one's measurement;
-  3. assigned tracks take their posterior (and may be confirmed); a measurement in no gate
+  2. assign, confirmed tracks first: GNN over the confirmed tracks' pairs (likelihood cost),
+     then GNN over the tentative tracks' pairs with the measurements left (Mahalanobis cost; the
+     initiator gets leftovers, as in Stone Soup's tracker), so a tentative track never takes a
+     confirmed one's measurement;
+  3. assigned tracks take their posterior (and may be confirmed); a measurement no track took
      starts a tentative track, up to max_tracks;
   4. lifecycle: chances, misses and deletions (fusion.tracking.lifecycle).
 """
@@ -139,8 +140,10 @@ def run_scan(ts: TrackSet, key: ScanKey, dets: tuple[Detection, ...], ctx: ScanC
 def _births_and_associations(ts: TrackSet, key: ScanKey, dets: tuple[Detection, ...], gated: Gated,
                              taken: dict[int, int], ctx: ScanContext, sm: SensorModel, mpos: Array,
                              tally: Counter) -> tuple[list[Association], Rows, list[int]]:
-    """What became of each measurement; a measurement in no gate starts a track (up to
-    max_tracks), born with single-point initiation."""
+    """What became of each measurement; one that no track took starts a track (up to
+    max_tracks), born with single-point initiation, whether or not it fell in a gate (as Stone
+    Soup's initiator takes every unassociated detection: the tentative track it starts dies
+    unless the data keep it, and a confirmed track is never outbid by it)."""
     t_ns, sensor_id = key
     ids, gti, nis = ts.ids.tolist(), gated.ti.tolist(), gated.nis.tolist()
     gated_by: dict[int, list[int]] = {}
@@ -150,37 +153,45 @@ def _births_and_associations(ts: TrackSet, key: ScanKey, dets: tuple[Detection, 
     births: list[int] = []
     room = ctx.max_tracks - len(ts)
     for j, d in enumerate(dets):
-        near = gated_by.get(j)
+        near = tuple(gated_by.get(j, ()))
         p = taken.get(j)
         if p is not None:
-            assoc.append(Association(sensor_id, t_ns, d.seq, Outcome.UPDATED, ids[gti[p]], nis[p], tuple(near)))
-        elif near:
-            assoc.append(Association(sensor_id, t_ns, d.seq, Outcome.UNASSIGNED, None, None, tuple(near)))
+            assoc.append(Association(sensor_id, t_ns, d.seq, Outcome.UPDATED, ids[gti[p]], nis[p], near))
+            continue
+        if near:  # in a gate, but no track took it
             tally[Tally.UNASSIGNED] += 1
-        elif len(births) >= room:
-            assoc.append(Association(sensor_id, t_ns, d.seq, Outcome.CAPACITY, None, None, ()))
+        if len(births) >= room:
+            assoc.append(Association(sensor_id, t_ns, d.seq, Outcome.UNASSIGNED if near else Outcome.CAPACITY,
+                                     None, None, near))
             tally[Tally.BIRTHS_REFUSED_CAPACITY] += 1
         else:
             births.append(j)
             assoc.append(Association(sensor_id, t_ns, d.seq, Outcome.BORN,
-                                     track_id_for(sensor_id, d.seq, t_ns), None, ()))
+                                     track_id_for(sensor_id, d.seq, t_ns), None, near))
     return assoc, _born_rows(ts, [dets[j] for j in births], mpos[births], sm, ctx), births
 
 
 def _assign_confirmed_first(g: Gated, ts: TrackSet, n_meas: int) -> list[int]:
-    """Pair indices assigned: GNN over confirmed tracks, then over tentative tracks and the
-    measurements the first stage left."""
+    """Pair indices assigned: GNN over confirmed tracks (cost NIS + ln det S, the negative
+    log-likelihood), then over tentative tracks and the measurements the first stage left, by
+    Mahalanobis distance sqrt(NIS) as an initiator does: among tentative tracks the likelihood
+    would favour the narrowest (often clutter-born) gate over the right one (bench/gospa.py
+    measured both; BENCHMARKS.md)."""
     if g.ti.size == 0:
         return []
     conf = ts.status[g.ti] == Status.CONFIRMED
     out: list[int] = []
     taken = np.zeros(n_meas, dtype=bool)
     ti, mj = g.ti.tolist(), g.mj.tolist()
-    for stage in (conf, ~conf):
+    for stage, likelihood in ((conf, True), (~conf, False)):
         sel = np.flatnonzero(stage & ~taken[g.mj])
         if sel.size == 0:
             continue
-        chosen = gnn_assign(g.ti[sel], g.mj[sel], g.cost[sel], g.limit[sel], n_tracks=len(ts), n_meas=n_meas)
+        cost, limit = g.cost[sel], g.limit[sel]
+        if not likelihood:  # tentative tracks: Mahalanobis distance sqrt(NIS) against sqrt(gate)
+            nis = g.nis[sel]
+            cost, limit = np.sqrt(nis), np.sqrt(limit - cost + nis)
+        chosen = gnn_assign(g.ti[sel], g.mj[sel], cost, limit, n_tracks=len(ts), n_meas=n_meas)
         index = {(ti[p], mj[p]): p for p in sel.tolist()}
         for i, j in chosen:
             out.append(index[(i, j)])

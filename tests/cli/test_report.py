@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import msgspec
+
 from fusion import messages as m
 from fusion.cli.report import counts_line, flat_counts, format_status, format_tracks
 from fusion.tracking.detection import Reason
@@ -56,3 +58,22 @@ def test_status_text() -> None:
     assert text.splitlines()[0] == "fusion service on namespace 'demo', up 2 min 5 s"
     assert "received 10 measurements: 9 applied, 1 duplicates dropped, 0 refused; published 7 estimates" in text
     assert "2 confirmed, 1 tentative" in text and "r.rrd (2.0 MB)" in text
+
+
+def test_status_text_says_what_failed_and_what_was_resumed() -> None:
+    st = m.ServiceStatus(uptime_s=5.0, counts=m.Counts(received=0, applied=0, duplicates=0, refused={}, queued=0,
+                                                        replays=0, late_applied=0, published=0, truth=0),
+                         tracks={}, latency={}, recording=None, recording_bytes=0, queue_depth=0,
+                         recording_error="recordings: not a folder",
+                         checkpoint=m.CheckpointStatus(path="c.ckpt", resumed_tracks=3, resumed_age_s=42.0, written=2,
+                                                       last_written_age_s=1.5))
+    text = format_status(st, "demo")
+    assert "recording  FAILED: recordings: not a folder (tracking and publishing go on)" in text
+    assert "checkpoint c.ckpt: resumed 3 tracks from a checkpoint 42.0 s old; 2 written; last written 1.5 s ago" \
+        in text
+    fresh = msgspec.structs.replace(st, recording_error=None, checkpoint=m.CheckpointStatus(
+        path="c.ckpt", resumed_tracks=0, refused="damaged (crc)", written=0, error="disk full"))
+    text = format_status(fresh, "demo")
+    assert "FAILED" not in text.split("checkpoint")[0]
+    assert "started with no checkpoint; one found at start was refused: damaged (crc); 0 written; the last write " \
+           "FAILED: disk full" in text

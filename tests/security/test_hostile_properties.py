@@ -15,7 +15,6 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from fusion import messages as m
-from fusion.errors import NotPositiveDefiniteError
 from fusion.io import wire
 from fusion.pipeline import Pipeline
 from fusion.tracking.tracker import Tracker
@@ -85,18 +84,15 @@ def test_the_tracker_fed_valid_but_nasty_measurements(batches, arrival0: int) ->
     assert c.received == n == c.applied + c.inputs + c.truth + sum(c.refused.values())
 
 
-@pytest.mark.xfail(strict=True, raises=NotPositiveDefiniteError,
-                   reason="found here, not fixed (tracker): a Cartesian measurement on a radar sensor is read as "
-                          "(range, bearing), bypassing the schema's range bounds; a range whose square underflows, "
-                          "one over ~1e11 m, or a range/bearing std ratio over ~1e8 m/rad makes the new track's P "
-                          "singular, and NotPositiveDefiniteError escapes Pipeline.ingest (it would end the "
-                          "service's loop)")
 @pytest.mark.parametrize("data", [
     m.Cartesian(pos_m=[5e-324, 0.0]), m.Cartesian(pos_m=[3.2e11, 2.0]),
     m.Radar(range_m=1.0, bearing_rad=1.0, range_std_m=1.0, bearing_std_rad=1e-12),
     m.Radar(range_m=1.0, bearing_rad=1.0, range_std_m=187.0, bearing_std_rad=1e-6)],
     ids=["cartesian-5e-324", "cartesian-3e11", "std-1e-12", "std-187-1e-6"])
 def test_extreme_valid_radar_data_is_refused_not_raised(data: m.Cartesian | m.Radar) -> None:
+    """Found by the property test above: Cartesian data on a radar's key were read as (range,
+    bearing), and a radar's own noise could make a new track's P singular; both escaped
+    Pipeline.ingest as NotPositiveDefiniteError. Now refused with a reason."""
     pipe = Pipeline(Tracker(_CFG.tracker), wire.Codec("demo"))
     msg = m.Measurement(sensor_id="radar1", t_ns=0, seq=0, data=data)
     pipe.ingest([(0, m.meas_key("demo", "radar1"), m.encode(msg))])

@@ -45,11 +45,12 @@ def test_replay_smooth_records_smoothed_tracks_below_the_filtered_error(name: st
     # 0-4 maneuver2d 0.056-0.071 -> 0.031-0.037 m, radar2d 3.87-4.83 -> 1.14-2.81 m
     assert smoothed < 0.75 * filtered, r.stdout
     rows = rrd_rows(out)
-    (tid,) = {e.split("/")[2] for e in rows if e.endswith("/smoothed/state")}
-    n = rows[f"/tracks/{tid}/state"]
+    (label,) = {e.split("/")[2] for e in rows if e.endswith("/smoothed/state")}
+    assert rows[f"/tracks/{label}/nis"] > 0, "smoothed beside the filtered track, under the same label"
+    n = rows[f"/tracks/{label}/smoothed/state"]
     assert n > 150
-    for entity in ("state", "std", "error"):
-        assert rows[f"/tracks/{tid}/smoothed/{entity}"] == n, entity
+    for entity in ("std", "error"):
+        assert rows[f"/tracks/{label}/smoothed/{entity}"] == n, entity
     v = subprocess.run([str(RERUN), "rrd", "verify", str(out)], capture_output=True, text=True, timeout=60, env=env)
     assert v.returncode == 0, v.stderr
 
