@@ -166,7 +166,8 @@ def _recording_lines(s: Summary) -> list[str]:
                          if c.mean is not None)
     lines = [f"  tracks     {len(s.tracks)} confirmed, {s.tentative_only} never confirmed{rmse}"]
     if verdicts:
-        lines.append(f"  filters    {verdicts} (mean over all confirmed tracks, 95 % chi-square test)")
+        lines.append(f"  filters    {verdicts} (mean over all confirmed tracks; NEES over position and velocity; "
+                     "95 % chi-square interval widened for time correlation: fusion inspect says how)")
     return lines
 
 

@@ -37,7 +37,6 @@ from scipy.stats import chi2
 from fusion.io.rrd_read import FOOTER, read_chunks
 
 
-
 @dataclass
 class TrackSummary:
     track_id: str  # the short label (fusion.io.labels.short_id)

@@ -269,7 +269,7 @@ class _Stacked:
         self.err, self.matched, self.nees, self.TX, self.W = err, matched, nees, TX, W
 
 
-def TX_full(TX: Array, idx: Array, shape: tuple[int, ...]) -> Array:  # noqa: N802 - the textbook letter
+def TX_full(TX: Array, idx: Array, shape: tuple[int, ...]) -> Array:
     """Matched true states scattered to the rows they belong to (NaN elsewhere)."""
     out = np.full(shape, np.nan)
     out[idx] = TX

@@ -23,10 +23,10 @@ from scipy.special import chdtri
 
 from fusion.config import TrackerConfig
 from fusion.errors import ConfigError
+from fusion.tracking.batched_gating import make_gater
 from fusion.tracking.checkpoint import TrackerState, restore, state_of
 from fusion.tracking.controls import InputTimeline
 from fusion.tracking.detection import ControlInput, Detection, Reason, Refusal
-from fusion.tracking.batched_gating import make_gater
 from fusion.tracking.history import Entry, History, Rewind, revise, revise_events
 from fusion.tracking.intake import Intake
 from fusion.tracking.lifecycle import Lifecycle

@@ -46,7 +46,7 @@ def latest(results: list[StepResult]) -> dict[tuple[int, int, str], Estimate]:
     return out
 
 
-def record_scenario(name: str, path, *, duration_s: float | None = None, sink_factory=None):  # noqa: ANN001, ANN201
+def record_scenario(name: str, path, *, duration_s: float | None = None, sink_factory=None):
     """The reference scenario `name` (configs/scenarios/<name>.toml) as the service runs it: its
     stream of samples (measurements and truth) through the Pipeline with a RerunSink writing
     `path`. Returns the pipeline (its tracker and counts) after the sink is closed."""

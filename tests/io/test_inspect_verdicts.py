@@ -16,7 +16,7 @@ from fusion.scenarios import reference, run_reference
 SEEDS = range(2000, 2040)
 
 
-def _prior_from_p0(ref, seed: int):  # noqa: ANN001, ANN202 - as tests/core/test_consistency.py
+def _prior_from_p0(ref, seed: int):
     """The filter's start drawn from N(truth0, P0): a consistent prior."""
     rng = np.random.default_rng([seed, 1])
     L = np.linalg.cholesky(ref.P0)

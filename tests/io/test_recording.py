@@ -11,10 +11,10 @@ import numpy as np
 import pytest
 from rerun.chunk import RrdReader
 
+from fusion.io.derive import ellipse_points
 from fusion.io.inspect import summarise
 from fusion.io.labels import short_id
 from fusion.io.recording import RotatingSink
-from fusion.io.derive import ellipse_points
 from fusion.io.rerun_sink import RerunSink
 from tests.io.scenario_run import latest, maneuver_run
 
