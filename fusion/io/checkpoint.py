@@ -2,7 +2,8 @@
 
 Writing: encode (msgpack) -> a temporary file in the same folder -> fsync -> rename over the
 checkpoint -> fsync the folder. A crash at any point leaves the old checkpoint or the new one,
-never a torn file. The file is the bytes MAGIC, then a msgpack CheckpointFile.
+never a torn file; a crash before the rename leaves the temporary file, which
+`remove_stale_temps` deletes (the service does at its next start). The file is the bytes MAGIC, then a msgpack CheckpointFile.
 
 Reading: a missing file is "no checkpoint"; a file that is not a checkpoint, is cut short, or
 was written by another configuration raises CheckpointError with the reason (the service then
@@ -44,7 +45,7 @@ def write_checkpoint(path: str | Path, tracker: Tracker, *, now_wall_ns: int | N
     p = Path(path)
     p.parent.mkdir(parents=True, exist_ok=True)
     data = MAGIC + _enc.encode(CheckpointFile(written_wall_ns=now_wall_ns or time.time_ns(), state=tracker.state()))
-    tmp = p.with_name(f".{p.name}.{os.getpid()}.tmp")
+    tmp = _temp_path(p, os.getpid())
     with open(tmp, "wb") as f:
         f.write(data)
         f.flush()
@@ -56,6 +57,24 @@ def write_checkpoint(path: str | Path, tracker: Tracker, *, now_wall_ns: int | N
     finally:
         os.close(fd)
     return len(data)
+
+
+def _temp_path(p: Path, pid: int | str) -> Path:
+    return p.with_name(f".{p.name}.{pid}.tmp")
+
+
+def remove_stale_temps(path: str | Path) -> list[Path]:
+    """Delete the temporary files of writes to `path` that never reached their rename (the
+    writer was killed mid-write); the checkpoint itself is untouched. The paths removed."""
+    p = Path(path)
+    gone = []
+    for t in sorted(p.parent.glob(_temp_path(p, "*").name)):
+        try:
+            t.unlink()
+        except FileNotFoundError:
+            continue
+        gone.append(t)
+    return gone
 
 
 @dataclass(frozen=True)

@@ -23,7 +23,7 @@ from pathlib import Path
 from typing import Any
 
 from fusion.config import CheckpointConfig, RecordingConfig
-from fusion.io.checkpoint import CheckpointError, read_checkpoint, write_checkpoint
+from fusion.io.checkpoint import CheckpointError, read_checkpoint, remove_stale_temps, write_checkpoint
 from fusion.tracking.results import Counts
 from fusion.tracking.tracker import Tracker
 
@@ -47,7 +47,13 @@ class Checkpointer:
 
     def resume(self, tracker: Tracker) -> bool:
         """Restore the checkpoint into `tracker` (freshly built, in place); False when there is
-        none or a bad one was moved aside (`tracker` then untouched)."""
+        none or a bad one was moved aside (`tracker` then untouched). Temporary files of a write
+        cut short by a kill are deleted first (the checkpoint is the old one then)."""
+        try:
+            for t in remove_stale_temps(self.path):
+                log.info("removed %s, left by a checkpoint write that was cut short", t)
+        except OSError as e:
+            log.warning("cannot remove the temporary files of %s: %s", self.path, e.strerror or e)
         try:
             r = read_checkpoint(self.path, tracker.config, into=tracker)
         except CheckpointError as e:
