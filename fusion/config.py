@@ -87,6 +87,13 @@ class ModeConfig(Section):
 ACCEL_PSD_DEFAULT = 1.0
 
 
+def mode_names(tracker: TrackerConfig) -> list[str]:
+    """Names of an IMM's modes, for people ("cv", "ct"; numbered when two share a model, as
+    "cv 1", "cv 2"); [] for a tracker that is not an IMM."""
+    models = [md.model for md in tracker.motion.modes] if tracker.motion.model == "imm" else []
+    return [f"{x} {models[:i].count(x) + 1}" if models.count(x) > 1 else x for i, x in enumerate(models)]
+
+
 class MotionConfig(Section):
     """The motion model of every track.
 

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from fusion import messages as m
-from fusion.config import ServiceConfig, load_service_config
+from fusion.config import ServiceConfig, load_service_config, mode_names
 from fusion.errors import ConfigError
 from fusion.io import wire
 from fusion.io.rerun_sink import RerunSink
@@ -73,7 +73,8 @@ def replay(stream: str | Path, *, config: str | Path | None = None, out: str | P
     if out is not None:
         sink = RerunSink(out, recording_id=Path(out).stem, layout=tracker.layout,
                          position_indices=tracker.position_indices, velocity_indices=tracker.velocity_indices,
-                         meta={"namespace": ns, "replay_of": str(stream)}, counts=lambda: pipe.counts().flat())
+                         meta={"namespace": ns, "replay_of": str(stream), "modes": mode_names(cfg.tracker)},
+                         counts=lambda: pipe.counts().flat())
     hist = Histories(sink) if smooth else None
     pipe = Pipeline(tracker, wire.Codec(ns), sink=hist if hist is not None else sink,
                     max_future_wall_ns=round(cfg.intake.max_future_wall_s * 1e9),

@@ -31,7 +31,7 @@ from pathlib import Path
 from typing import Any
 
 from fusion import messages as m
-from fusion.config import ServiceConfig
+from fusion.config import ServiceConfig, mode_names
 from fusion.fixed_lag import FixedLagSmoother, smoothed_key
 from fusion.io import wire
 from fusion.io.checkpointer import Checkpointer, counts_since, service_checkpoint_path
@@ -154,7 +154,8 @@ class Service:
         common: dict[str, Any] = dict(
             layout=self.tracker.layout, position_indices=self.tracker.position_indices,
             velocity_indices=self.tracker.velocity_indices, flush_interval_s=rc.flush_interval_s,
-            meta={"namespace": self.ns, "sensors": sorted(self.tracker.sensors), "model": self.tracker.model_name},
+            meta={"namespace": self.ns, "sensors": sorted(self.tracker.sensors), "model": self.tracker.model_name,
+                  "modes": mode_names(self.config.tracker)},
             counts=self._counts_for_recording,
         )
         if recording_path is not None:

@@ -94,6 +94,8 @@ class RerunSink:
         info = {"layout": list(layout), "position_indices": list(position_indices),
                 "velocity_indices": list(velocity_indices), "labels": "fusion.io.labels.short_id", **(meta or {})}
         self.rec.log("meta", rr.TextDocument(json.dumps(info, sort_keys=True), media_type="text/plain"), static=True)
+        # the names of an IMM's modes for their probability series (meta "modes"; else "mode j")
+        self.mode_names: tuple[str, ...] = tuple(str(n) for n in (meta or {}).get("modes", ()))
         self._send_blueprint()
 
     # ---- continuity across files -----------------------------------------------------------------

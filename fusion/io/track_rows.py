@@ -222,7 +222,7 @@ class Rows:
         if mk:
             mu = np.stack([es[k].mode_probabilities for k in mk])  # type: ignore[misc]
             sel = np.array(mk)
-            sink.col(f"{base}/mode", "scalars", width=mu.shape[1], names=[f"model {j}" for j in range(mu.shape[1])],
+            sink.col(f"{base}/mode", "scalars", width=mu.shape[1], names=_mode_names(sink.mode_names, mu.shape[1]),
                      colors=series_colours(mu.shape[1])).extend(t[sel], step[sel], arr[sel], v=list(mu))
 
     def _cursor(self, sink: Any, tid: int, lab: str, rows: Array, es: list[Estimate], c: _Stacked) -> None:
@@ -274,3 +274,8 @@ def TX_full(TX: Array, idx: Array, shape: tuple[int, ...]) -> Array:
     out = np.full(shape, np.nan)
     out[idx] = TX
     return out
+
+
+def _mode_names(names: tuple[str, ...], k: int) -> list[str]:
+    """The IMM's mode names for its k probability series ("mode j" where none are given)."""
+    return list(names) if len(names) == k else [f"mode {j}" for j in range(k)]

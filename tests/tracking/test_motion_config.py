@@ -32,3 +32,14 @@ def test_ca_with_the_acceleration_field_names_the_jerk_field(motion: MotionConfi
 def test_jerk_on_another_model_is_refused() -> None:
     with pytest.raises(ValueError, match=r"jerk_psd_m2s5 is the noise of model 'ca'; model 'cv' takes accel_psd"):
         TrackerConfig(sensors=SENSORS, motion=MotionConfig(model="cv", jerk_psd_m2s5=0.4))
+
+
+def test_imm_modes_are_named_for_people() -> None:
+    from fusion.config import load_service_config, mode_names
+    from fusion.io.track_rows import _mode_names
+    from publishers.spec import load_scenario_file, scenario_path
+
+    assert mode_names(load_service_config("configs/service.toml").tracker) == ["cv", "ct"]
+    assert mode_names(load_scenario_file(scenario_path("maneuver2d")).service.tracker) == ["cv 1", "cv 2"]
+    assert mode_names(load_scenario_file(scenario_path("radar2d")).service.tracker) == []
+    assert _mode_names(("cv", "ct"), 2) == ["cv", "ct"] and _mode_names((), 2) == ["mode 0", "mode 1"]
