@@ -77,3 +77,12 @@ def test_status_text_says_what_failed_and_what_was_resumed() -> None:
     assert "FAILED" not in text.split("checkpoint")[0]
     assert "started with no checkpoint; one found at start was refused: damaged (crc); 0 written; the last write " \
            "FAILED: disk full" in text
+
+
+def test_a_recording_that_cannot_be_written_is_a_file_error_not_an_internal_one() -> None:
+    from fusion.cli.runner import Exit, classify
+
+    e = classify(RuntimeError("Failed to create file: No space left on device (os error 28), path: /full/x.rrd"))
+    assert e.code == Exit.FILE
+    assert str(e).startswith("/full/x.rrd: cannot write the recording (Failed to create file: No space left on device")
+    assert classify(RuntimeError("something else")).code == Exit.INTERNAL
