@@ -8,8 +8,8 @@ repeat: no sink (the baseline), the shipped RerunSink, and main's sink before th
 from git as a reference only, when the repository has a `main` branch). Reported: microseconds per
 measurement; the sink's share two ways: the difference (with sink - without) / measurements,
 which the machine's load makes noisy, and the time inside the sink's own calls (log_truth,
-log_step and the flushes on the sink's cadence) / measurements; the final flush of what is pending plus the close, a cost per
-file, apart in milliseconds.
+log_step and the flushes on the sink's cadence) / measurements; the final flush of what is
+pending plus the close, a cost per file, apart in milliseconds.
 """
 
 from __future__ import annotations
@@ -114,7 +114,7 @@ def run(*, quick: bool = False) -> dict[str, float]:
     print(f"{'tracks':>6} {'sink':>14} {'us/meas':>10} {'difference us/meas':>22} {'in sink us/meas':>22} "
           f"{'x no sink':>9} {'close ms':>9}")
     for n_targets in (10, 100, 1000):
-        n_scans = {10: 300 if not quick else 100, 100: 100 if not quick else 40, 1000: 40 if not quick else 15}[n_targets]
+        n_scans = ({10: 100, 100: 40, 1000: 15} if quick else {10: 300, 100: 100, 1000: 40})[n_targets]
         data = scans(n_targets, n_scans)
         truths = _truths(n_targets, n_scans)
         times: dict[str, list[float]] = {k: [] for k in sinks}

@@ -104,10 +104,10 @@ def classify(exc: BaseException, *, where: str = "") -> CliError:
         return CliError(Exit.FILE, str(exc))
     if isinstance(exc, OSError) and exc.filename is not None:
         return CliError(Exit.FILE, f"{exc.filename}: {exc.strerror or exc}")
-    if type(exc).__module__.split(".")[0] in ("rerun", "rerun_bindings") or "(os error " in str(exc):
-        # the Rerun writer's file errors come as RuntimeError("Failed to create file: ... (os error N), path: P")
-        if m := re.search(r"(Failed to \w+ file|No space left on device|Permission denied)[^,]*(?:, path: (\S+))?",
-                          str(exc)):
+    # the Rerun writer's file errors come as RuntimeError("Failed to create file: ... (os error N), path: P")
+    rerun_io = type(exc).__module__.split(".")[0] in ("rerun", "rerun_bindings") or "(os error " in str(exc)
+    if rerun_io and (m := re.search(r"(Failed to \w+ file|No space left on device|Permission denied)[^,]*"
+                                    r"(?:, path: (\S+))?", str(exc))):
             where = f"{m.group(2)}: " if m.group(2) else ""
             return CliError(Exit.FILE, f"{where}cannot write the recording ({m.group(0).split(', path')[0]}); "
                                        "free some space or give another folder (--recordings / -o)")

@@ -3,7 +3,8 @@
 Writing: encode (msgpack) -> a temporary file in the same folder -> fsync -> rename over the
 checkpoint -> fsync the folder. A crash at any point leaves the old checkpoint or the new one,
 never a torn file; a crash before the rename leaves the temporary file, which
-`remove_stale_temps` deletes (the service does at its next start). The file is the bytes MAGIC, then a msgpack CheckpointFile.
+`remove_stale_temps` deletes (the service does at its next start). The file is the bytes
+MAGIC, then a msgpack CheckpointFile.
 
 Reading: a missing file is "no checkpoint"; a file that is not a checkpoint, is cut short, or
 was written by another configuration raises CheckpointError with the reason (the service then

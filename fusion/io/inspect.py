@@ -138,7 +138,6 @@ def verdict(values: np.ndarray, dofs: np.ndarray, seqs: list[np.ndarray] | None 
     if k == 0:
         return Consistency(0, 0, None, None, "no data", "")
     total, dof = float(values.sum()), int(dofs.sum())
-    dbar = dof / k  # the nominal mean of a sample
     seqs_ = seqs if seqs is not None else [values]
     tau_hat = autocorrelation_time(seqs_, float(values.mean()))
     # about the sample mean, the estimate is biased low: E[tau_hat] ~ tau (1 - tau / L) for

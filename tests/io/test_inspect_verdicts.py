@@ -1,6 +1,6 @@
 """`fusion inspect`'s NIS/NEES verdicts (fusion.io.inspect.verdict: chi-square over the effectively
-independent samples of time-correlated ones) say "consistent" at about the nominal 95 % rate for well-matched filters, where the
-independent-samples chi-square rule it replaced did not (NEES of cv1d_a: 14 of 40 seeds)."""
+independent samples of time-correlated ones) say "consistent" at about the nominal 95 % rate for
+well-matched filters, where the independent-samples chi-square rule it replaced did not (NEES of cv1d_a: 14 of 40 seeds)."""
 
 from __future__ import annotations
 
