@@ -1,0 +1,87 @@
+"""The scan's results are pinned bit for bit: a digest of everything a seeded multi-target run
+reports (estimates with their review arrays, associations, events, counts), taken on the code
+before the scan's performance work (issue 11), so that any change in results fails here.
+
+A digest that changes on purpose (a change of the algorithm, not of its speed) is updated with
+the reason in the commit; a faster scan must leave it as it is.
+"""
+
+from __future__ import annotations
+
+import hashlib
+
+import numpy as np
+import pytest
+
+from fusion.config import LifecycleConfig, ModeConfig, MotionConfig, TrackerConfig
+from fusion.tracking.results import StepResult
+from fusion.tracking.tracker import Tracker
+from tests.tracking.streams import Sensor, constant_velocity, detect, in_order, scans
+
+CART = Sensor("cam1", "cartesian", period_s=0.2, std_m=3.0)
+RADAR = Sensor("radar1", "radar", period_s=0.1, offset_s=0.05, range_std_m=5.0, bearing_std_rad=0.003,
+               position_m=(500.0, -800.0))
+# the shipped configuration's motion (configs/service.toml), and the models sharing its path
+MOTIONS = {
+    "imm-cv-ct": MotionConfig(model="imm", modes=[
+        ModeConfig(model="cv", accel_psd_m2s3=0.0025, sojourn_s=120.0),
+        ModeConfig(model="ct", accel_psd_m2s3=0.0025, turn_psd_rad2s3=0.001, sojourn_s=10.0)]),
+    "cv": MotionConfig(model="cv", accel_psd_m2s3=0.05),
+    "ukf-ct": MotionConfig(model="ct", accel_psd_m2s3=0.05, turn_psd_rad2s3=0.001, filter="ukf"),
+}
+DIGESTS = {
+    "imm-cv-ct": "e84782dab4ca1ed68a0efb7a27c79164e5c20df2f5ee56761a42780b4a161655",
+    "cv": "88e5ad00ea6e7878f440591750fcd3ca0e240d9023691dd9c23119d5dbeb6423",
+    "ukf-ct": "4c9fe0e51621d8a446d664eb5498e2a1a7092e313c4de242b3b33eef2c3d4919",
+}
+
+
+def _arr(h: "hashlib._Hash", a: object) -> None:
+    if a is None:
+        h.update(b"N")
+    else:
+        v = np.ascontiguousarray(a, dtype=np.float64)
+        h.update(repr(v.shape).encode())
+        h.update(v.tobytes())
+
+
+def _feed(h: "hashlib._Hash", r: StepResult) -> None:
+    for e in r.estimates:
+        h.update(repr((e.track_id, e.t_ns, e.sensor_id, e.seq, e.status, e.revision, e.nis)).encode())
+        for a in (e.x, e.P, e.y, e.S, e.mode_probabilities, e.meas_pos, e.prior_x, e.prior_P, e.H):
+            _arr(h, a)
+    for ev in r.events:
+        h.update(repr(ev.key + (ev.retracted,)).encode())
+    for a in r.associations:
+        h.update(repr((a.sensor_id, a.t_ns, a.seq, a.outcome.value, a.track_id, a.nis, a.gated)).encode())
+    for p in r.measurements:
+        h.update(repr((p.sensor_id, p.t_ns, p.seq)).encode())
+        _arr(h, p.position)
+
+
+def digest(name: str, seed: int = 11) -> str:
+    """Twelve targets (one turning), radar 10 Hz and camera 5 Hz with misses and clutter; every
+    scan processed in order, then a late batch (one scan of each sensor held back 6 scans)."""
+    rng = np.random.default_rng(seed)
+    truth = constant_velocity(n_targets=12, duration_s=12.0, rng=rng, spread_m=400.0,
+                              manoeuvre=(3, 4.0, 8.0, 0.15))
+    dets = in_order(*(detect(truth, s, rng=rng, pd=0.9, clutter_mean=1.5, region_m=(-600, 600, -600, 600))
+                      for s in (CART, RADAR)))
+    tr = Tracker(TrackerConfig(sensors=[CART.config(), RADAR.config()], motion=MOTIONS[name],
+                               lifecycle=LifecycleConfig(confirm_m=3, confirm_n=5, max_misses=8)))
+    h = hashlib.sha256()
+    batches = list(scans(dets))
+    held = {len(batches) - 8, len(batches) - 7}
+    for k, batch in enumerate(batches):
+        if k in held:
+            continue
+        _feed(h, tr.process([d.det for d in batch]))
+    _feed(h, tr.process([d.det for k in sorted(held) for d in batches[k]]))
+    c = tr.counts
+    h.update(repr(sorted(c.flat().items())).encode())
+    return h.hexdigest()
+
+
+@pytest.mark.parametrize("name", sorted(MOTIONS))
+def test_results_are_bit_identical_to_the_pinned_run(name: str) -> None:
+    assert digest(name) == DIGESTS[name]
