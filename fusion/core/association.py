@@ -5,8 +5,10 @@ Coarse gate. If the Mahalanobis distance y' S^-1 y <= g, then every component ob
 and measured point m_j (variance w_ja per axis), a pair is kept when for every axis
     |p_ia - m_ja| <= k sqrt(v_ia + w_ja),     k = margin * sqrt(g)
 which is exact for linear Cartesian models (margin 1) and a generous prefilter otherwise.
-Candidates are found by a sweep over tracks sorted on the first axis, so the cost grows with
-the number of candidate pairs, not with tracks x measurements.
+Candidates are found by a sweep (compiled, numba): measurements sorted on the first axis, and
+for each track i the measurements within k sqrt(v_i0 + max_j w_j0) of p_i0 on that axis found
+by binary search, then tested on every axis; so the cost grows with N log M plus the number of
+candidates, not with tracks x measurements, and one wide track widens only its own window.
 
 Assignment. Among gated pairs with costs c_ij (the negative log-likelihood NIS + ln det S)
 and limits l_ij (g + ln det S: the cost at the gate's edge), GNN minimises the sum of pair
@@ -18,12 +20,57 @@ scipy's linear_sum_assignment.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
+from numba import njit
 from scipy.optimize import linear_sum_assignment
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from fusion.core.checks import Array
+
+
+@njit(cache=True, fastmath=False)
+def _sweep(track_pos: np.ndarray, track_var: np.ndarray, meas_pos: np.ndarray, meas_var: np.ndarray,
+           k: float) -> tuple[np.ndarray, np.ndarray]:
+    """Pairs (i, j) with (p_ia - m_ja)^2 <= k^2 (v_ia + w_ja) on every axis a, by track."""
+    N, d = track_pos.shape
+    M = meas_pos.shape[0]
+    order = np.argsort(meas_pos[:, 0], kind="mergesort")
+    xs = np.empty(M)
+    for c in range(M):
+        xs[c] = meas_pos[order[c], 0]
+    wmax = meas_var[0, 0]
+    for j in range(1, M):
+        wmax = max(wmax, meas_var[j, 0])
+    lo = np.empty(N, dtype=np.intp)
+    hi = np.empty(N, dtype=np.intp)
+    total = 0
+    for i in range(N):
+        # widened by a relative 1e-9 so that rounding never drops a pair the exact test keeps
+        half = k * math.sqrt(track_var[i, 0] + wmax) * (1.0 + 1e-9) + 1e-300
+        lo[i] = np.searchsorted(xs, track_pos[i, 0] - half, side="left")
+        hi[i] = np.searchsorted(xs, track_pos[i, 0] + half, side="right")
+        total += hi[i] - lo[i]
+    kk = k * k
+    ti = np.empty(total, dtype=np.intp)
+    mj = np.empty(total, dtype=np.intp)
+    n = 0
+    for i in range(N):
+        for c in range(lo[i], hi[i]):
+            j = order[c]
+            ok = True
+            for a in range(d):
+                e = abs(track_pos[i, a] - meas_pos[j, a])
+                if not e * e <= kk * (track_var[i, a] + meas_var[j, a]):
+                    ok = False
+                    break
+            if ok:
+                ti[n] = i
+                mj[n] = j
+                n += 1
+    return ti[:n], mj[:n]
 
 
 def coarse_pairs(
@@ -37,23 +84,9 @@ def coarse_pairs(
     if N == 0 or M == 0:
         e = np.empty(0, dtype=np.intp)
         return e, e
-    order = np.argsort(track_pos[:, 0], kind="stable")
-    xs = track_pos[order, 0]
-    # Half-width on axis 0 for measurement j against any track: k sqrt(max_i v_i0 + w_j0).
-    half = k * np.sqrt(track_var[:, 0].max() + meas_var[:, 0])
-    lo = np.searchsorted(xs, meas_pos[:, 0] - half, side="left")
-    hi = np.searchsorted(xs, meas_pos[:, 0] + half, side="right")
-    counts = hi - lo
-    total = int(counts.sum())
-    if total == 0:
-        e = np.empty(0, dtype=np.intp)
-        return e, e
-    j = np.repeat(np.arange(M), counts)
-    offs = np.arange(total) - np.repeat(np.cumsum(counts) - counts, counts)
-    i = order[np.repeat(lo, counts) + offs]
-    d = np.abs(track_pos[i] - meas_pos[j])
-    ok = (d * d <= k * k * (track_var[i] + meas_var[j])).all(axis=1)
-    i, j = i[ok], j[ok]
+    c = np.ascontiguousarray
+    i, j = _sweep(c(track_pos, np.float64), c(track_var, np.float64), c(meas_pos, np.float64),
+                  c(meas_var, np.float64), float(k))
     s = np.lexsort((i, j))
     return i[s], j[s]
 
