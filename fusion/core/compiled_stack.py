@@ -5,12 +5,19 @@ give identical numbers), in one call per stack instead of one numpy call per ope
     predict_many:  x-_k = F_k x_k,  P-_k = F_k P_k F_k' + Q_k
     update_many:   the Joseph-form update of fusion.core.compiled.update for each k, with
                    ok_k = False where S_k is not positive definite.
+    innovate_many: the first half of that update alone (what a gate needs to decide):
+                   S_k = H_k P_k H_k' + R_k (symmetrised) = L_k L_k', w_k = L_k^-1 y_k,
+                   NIS_k = w_k'w_k, log-likelihood -(NIS_k + ln det S_k + m ln 2 pi) / 2, with
+                   the same operations in the same order as update, so the numbers are identical
+                   and the posterior need only be computed for the pairs a gate keeps.
     combine_many:  moment-matched mixtures over the mode axis,
                    x_k = sum_m w_km x_km,  P_k = sum_m w_km P_km + sum_m w_km d_km d_km'
                    (d_km = x_km - x_k), symmetrised as (P_k + P_k') / 2.
 """
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 from numba import njit
@@ -50,6 +57,71 @@ def update_many(X: np.ndarray, P: np.ndarray, Y: np.ndarray, H: np.ndarray, R: n
         nis[k] = v
         ll[k] = lk
     return ok, Xn, Pn, S, nis, ll
+
+
+@njit(cache=True, fastmath=False)
+def innovate_many(P: np.ndarray, Y: np.ndarray, H: np.ndarray, R: np.ndarray
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    N, n = P.shape[0], P.shape[1]
+    m = Y.shape[1]
+    ok = np.ones(N, dtype=np.bool_)
+    S_out = np.empty((N, m, m))
+    nis_out = np.zeros(N)
+    ll_out = np.zeros(N)
+    HP = np.empty((m, n))
+    L = np.empty((m, m))
+    w = np.empty(m)
+    two_pi_term = m * math.log(2.0 * math.pi)
+    for q in range(N):
+        S = S_out[q]
+        for i in range(m):
+            for j in range(n):
+                s = 0.0
+                for k in range(n):
+                    s += H[q, i, k] * P[q, k, j]
+                HP[i, j] = s
+        for i in range(m):
+            for j in range(m):
+                s = 0.0
+                for k in range(n):
+                    s += HP[i, k] * H[q, j, k]
+                S[i, j] = s + R[q, i, j]
+        for i in range(m):
+            for j in range(i):
+                a = 0.5 * (S[i, j] + S[j, i])
+                S[i, j] = a
+                S[j, i] = a
+        L[:, :] = 0.0
+        good = True
+        for j in range(m):
+            d = S[j, j]
+            for k in range(j):
+                d -= L[j, k] * L[j, k]
+            if not d > 0.0:
+                good = False
+                break
+            L[j, j] = math.sqrt(d)
+            for i in range(j + 1, m):
+                s = S[i, j]
+                for k in range(j):
+                    s -= L[i, k] * L[j, k]
+                L[i, j] = s / L[j, j]
+        if not good:
+            ok[q] = False
+            continue
+        for i in range(m):
+            s = Y[q, i]
+            for k in range(i):
+                s -= L[i, k] * w[k]
+            w[i] = s / L[i, i]
+        nis = 0.0
+        logdet = 0.0
+        for i in range(m):
+            nis += w[i] * w[i]
+            logdet += 2.0 * math.log(L[i, i])
+        nis_out[q] = nis
+        ll_out[q] = -0.5 * (nis + logdet + two_pi_term)
+    return ok, S_out, nis_out, ll_out
 
 
 @njit(cache=True, fastmath=False)
@@ -99,3 +171,14 @@ def update_stack(X: np.ndarray, P: np.ndarray, Y: np.ndarray, H: np.ndarray, R: 
     c = np.ascontiguousarray
     return update_many(c(X, np.float64), c(P, np.float64), c(Y, np.float64),
                        c(np.broadcast_to(H, (N, m, n)), np.float64), c(np.broadcast_to(R, (N, m, m)), np.float64))
+
+
+def innovate_stack(P: np.ndarray, Y: np.ndarray, H: np.ndarray, R: np.ndarray
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """innovate_many on float64 C-contiguous copies (H, R broadcast to the stack): (ok, S, NIS,
+    log-likelihood), equal bit for bit to those of update_stack."""
+    N, n = P.shape[0], P.shape[1]
+    m = Y.shape[1]
+    c = np.ascontiguousarray
+    return innovate_many(c(P, np.float64), c(Y, np.float64), c(np.broadcast_to(H, (N, m, n)), np.float64),
+                         c(np.broadcast_to(R, (N, m, m)), np.float64))

@@ -4,7 +4,9 @@ The same equations as fusion.core.imm (mixing with Pi(dt) = expm(Lambda dt), eac
 predict and update, mode probabilities from the likelihoods, the moment-matched combination),
 evaluated on stacks (each mode's predict and update with the filters' compiled kernels looped
 over the stack, fusion.core.compiled_stack), for an IMM whose modes are extended Kalman filters
-over motion models that broadcast. For pair k with mode states
+over motion models that broadcast. The update comes in two halves so that a gate computes the
+posteriors of the pairs it keeps only: innovate_imm (everything up to NIS and the likelihood)
+for every candidate pair, posterior_imm for the kept ones. For pair k with mode states
 (x_kj, P_kj), probabilities mu_k and time step dt_k:
     c_k = mu_k Pi(dt_k),   w_kij = Pi(dt_k)_ij mu_ki / c_kj,
     x0_kj = sum_i w_kij x_ki,   P0_kj = sum_i w_kij (P_ki + (x_ki - x0_kj)(x_ki - x0_kj)')
@@ -21,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from fusion.core.checks import Array
-from fusion.core.compiled_stack import combine_stack, predict_stack, update_stack
+from fusion.core.compiled_stack import combine_stack, innovate_stack, predict_stack, update_stack
 from fusion.core.imm import IMM
 from fusion.core.kalman import ExtendedKalmanFilter
 from fusion.core.measurement import MeasurementModel
@@ -69,33 +71,36 @@ def predict_imm(imm: IMM, xs: Array, Ps: Array, mu: Array, dt: Array) -> StackPr
 
 
 @dataclass(frozen=True)
-class StackUpdate:
-    """Posterior mode states and probabilities, their combination, the mixture innovation, its
-    covariance, NIS and log-likelihood, and the measurement Jacobian at the combined prior."""
+class StackInnovation:
+    """What a gate decides on, for N (predicted IMM state, measurement) pairs: each mode's
+    innovation ys (N, M, m), its covariance Ss (N, M, m, m) and Jacobian Hs (N, M, m, n) at the
+    mode's prior; the posterior mode probabilities mu (N, M); the mixture innovation y, its
+    covariance S, NIS and log-likelihood; and the measurement noise R (N, m, m)."""
 
-    xs: Array
-    Ps: Array
+    ys: Array
+    Ss: Array
+    Hs: Array
     mu: Array
-    x: Array
-    P: Array
     y: Array
     S: Array
     nis: Array
     loglik: Array
-    H: Array
+    R: Array
 
 
-def update_imm(pred: StackPrediction, Z: Array, R: Array, model: MeasurementModel) -> StackUpdate:
-    """Update N predicted IMM states with one measurement each (Z (N, m), R (N, m, m)).
-    Raises NumericalError where some mode's S is not positive definite."""
+def innovate_imm(pred: StackPrediction, Z: Array, R: Array, model: MeasurementModel) -> StackInnovation:
+    """The innovation half of the update of N predicted IMM states with one measurement each
+    (Z (N, m), R (N, m, m)): everything but the modes' posteriors. Raises NumericalError where
+    some mode's S is not positive definite."""
     N, M, n = pred.xs.shape
     m = Z.shape[1]
-    xs, Ps = np.empty_like(pred.xs), np.empty_like(pred.Ps)
     ys, Ss, ll = np.empty((N, M, m)), np.empty((N, M, m, m)), np.empty((N, M))
+    Hs = np.empty((N, M, m, n))
     for j in range(M):
         xp = pred.xs[:, j]
         y = model.residual(Z, model.h(xp))
-        ok, xs[:, j], Ps[:, j], Ss[:, j], _, ll[:, j] = update_stack(xp, pred.Ps[:, j], y, model.jacobian(xp), R)
+        Hs[:, j] = model.jacobian(xp)
+        ok, Ss[:, j], _, ll[:, j] = innovate_stack(pred.Ps[:, j], y, Hs[:, j], R)
         if not ok.all():
             raise NumericalError("an innovation covariance S is not positive definite")
         ys[:, j] = y
@@ -109,6 +114,19 @@ def update_imm(pred: StackPrediction, Z: Array, R: Array, model: MeasurementMode
     dy = ys - y[:, None, :]
     S = np.einsum("km,kmab->kab", c, Ss) + np.einsum("km,kma,kmb->kab", c, dy, dy)
     nis = np.einsum("ka,ka->k", y, np.linalg.solve(S, y[..., None])[..., 0])
-    x, P = combine_stack(xs, Ps, mu)
-    H = np.broadcast_to(model.jacobian(pred.x), (N, m, n))
-    return StackUpdate(xs, Ps, mu, x, P, y, S, nis, mix_ll, H)
+    return StackInnovation(ys, Ss, Hs, mu, y, S, nis, mix_ll, np.broadcast_to(R, (N, m, m)))
+
+
+def posterior_imm(pred: StackPrediction, inn: StackInnovation, rows: np.ndarray) -> tuple[Array, Array, Array, Array]:
+    """The modes' posteriors of pairs `rows` (each mode's EKF update from its innovation) and
+    their combination with the posterior mode probabilities: (xs, Ps, x, P)."""
+    K, (_, M, n) = rows.size, pred.xs.shape
+    xs, Ps = np.empty((K, M, n)), np.empty((K, M, n, n))
+    R = inn.R[rows]
+    for j in range(M):
+        ok, xs[:, j], Ps[:, j], _, _, _ = update_stack(pred.xs[rows, j], pred.Ps[rows, j], inn.ys[rows, j],
+                                                       inn.Hs[rows, j], R)
+        if not ok.all():
+            raise NumericalError("an innovation covariance S is not positive definite")
+    x, P = combine_stack(xs, Ps, inn.mu[rows])
+    return xs, Ps, x, P

@@ -11,6 +11,8 @@ The same equations, with k indexing the stack and s the 2n + 1 sigma points:
               P+_k = P-_k - K_k S_k K_k' (symmetrised),  NIS_k = |L_k^-1 y_k|^2.
 For a UKF with plain state arithmetic (UnscentedKalmanFilter.plain_state), a motion model that
 broadcasts, and a measurement model that broadcasts and keeps MeasurementModel.mean.
+The update comes in two halves so that a gate computes the posteriors of the pairs it keeps
+only: innovate_ukf (y, S, NIS, likelihood) for every candidate pair, posterior_ukf for the kept.
 """
 
 from __future__ import annotations
@@ -58,10 +60,12 @@ def predict_ukf(ukf: UnscentedKalmanFilter, X: Array, P: Array, dt: Array) -> tu
     return x, 0.5 * (Pp + np.swapaxes(Pp, -1, -2))
 
 
-def update_ukf(ukf: UnscentedKalmanFilter, x: Array, P: Array, Z: Array, R: Array, model: MeasurementModel
-               ) -> tuple[Array, Array, Array, Array, Array, Array]:
-    """N predicted states updated with one measurement each (Z (N, m), R (N, m, m)): x+, P+, y,
-    S, NIS, log-likelihood. Raises NumericalError where some S is not positive definite."""
+def innovate_ukf(ukf: UnscentedKalmanFilter, x: Array, P: Array, Z: Array, R: Array, model: MeasurementModel
+                 ) -> tuple[Array, Array, Array, Array, tuple[Array, ...]]:
+    """The innovation half of the update of N predicted states with one measurement each
+    (Z (N, m), R (N, m, m)): y, S, NIS, log-likelihood, and what posterior_ukf needs (sigma
+    offsets dX, dZ, the Cholesky factor L). Raises NumericalError where some S is not positive
+    definite."""
     c, Wm, Wc = ukf.points.weights(ukf.motion.ndim_state)
     SX = sigma_stack(x, P, c)
     Zs = model.h(SX)
@@ -72,17 +76,26 @@ def update_ukf(ukf: UnscentedKalmanFilter, x: Array, P: Array, Z: Array, R: Arra
     dX = SX - x[:, None, :]
     S = _weighted_outer(dZ, Wc, dZ) + R
     S = 0.5 * (S + np.swapaxes(S, -1, -2))
-    Pxz = _weighted_outer(dX, Wc, dZ)
     try:
         L = np.linalg.cholesky(S)
     except np.linalg.LinAlgError:
         raise NumericalError("an innovation covariance S is not positive definite") from None
     y = model.residual(Z, zhat)
     w = np.linalg.solve(L, y[..., None])[..., 0]
+    nis = np.einsum("ka,ka->k", w, w)
+    ll = -0.5 * (nis + 2.0 * np.log(np.diagonal(L, axis1=-2, axis2=-1)).sum(axis=-1) + model.ndim_meas * LOG_2PI)
+    return y, S, nis, ll, (dX, dZ, L)
+
+
+def posterior_ukf(ukf: UnscentedKalmanFilter, x: Array, P: Array, y: Array, S: Array, inner: tuple[Array, ...]
+                  ) -> tuple[Array, Array]:
+    """x+, P+ from the innovation half (innovate_ukf) of some pairs: x, P, y, S and `inner` rows
+    of the same pairs."""
+    _, _, Wc = ukf.points.weights(ukf.motion.ndim_state)
+    dX, dZ, L = inner
+    Pxz = _weighted_outer(dX, Wc, dZ)
     Lt = np.swapaxes(L, -1, -2)
     Kt = np.linalg.solve(Lt, np.linalg.solve(L, np.swapaxes(Pxz, -1, -2)))
     xn = x + np.matmul(np.swapaxes(Kt, -1, -2), y[..., None])[..., 0]
     Pn = P - np.swapaxes(Kt, -1, -2) @ S @ Kt
-    nis = np.einsum("ka,ka->k", w, w)
-    ll = -0.5 * (nis + 2.0 * np.log(np.diagonal(L, axis1=-2, axis2=-1)).sum(axis=-1) + model.ndim_meas * LOG_2PI)
-    return xn, 0.5 * (Pn + np.swapaxes(Pn, -1, -2)), y, S, nis, ll
+    return xn, 0.5 * (Pn + np.swapaxes(Pn, -1, -2))

@@ -4,7 +4,9 @@
   an IMM of such EKFs (fusion.core.imm_stack), or a UKF with plain state arithmetic over such a
   model (fusion.core.ukf_stack): each candidate track predicted once, every pair of a scan
   updated at once per measurement dimension (the EKF's compiled kernels looped over the stack,
-  fusion.core.compiled_stack; the UKF's equations as numpy operations on stacks);
+  fusion.core.compiled_stack; the UKF's equations as numpy operations on stacks), in two halves:
+  the innovation (NIS, likelihood) of every candidate pair, then the posterior of the pairs
+  inside the gate only (a radar's coarse gate passes ~5 candidates per kept pair);
 - otherwise fusion.tracking.gating.PerPairGate, one filter call per track and per pair.
 They agree to 1e-12 where both apply (tested); the gate's math is in fusion.tracking.gating.
 """
@@ -16,13 +18,13 @@ from abc import ABC, abstractmethod
 import numpy as np
 
 from fusion.core.checks import Array
-from fusion.core.compiled_stack import predict_stack, update_stack
+from fusion.core.compiled_stack import innovate_stack, predict_stack, update_stack
 from fusion.core.imm import IMM, Filter
-from fusion.core.imm_stack import StackPrediction, predict_imm, stackable, update_imm
+from fusion.core.imm_stack import StackPrediction, innovate_imm, posterior_imm, predict_imm, stackable
 from fusion.core.kalman import ExtendedKalmanFilter
 from fusion.core.measurement import MeasurementModel
 from fusion.core.ukf import UnscentedKalmanFilter
-from fusion.core.ukf_stack import predict_ukf, stackable_measurement, update_ukf
+from fusion.core.ukf_stack import innovate_ukf, posterior_ukf, predict_ukf, stackable_measurement
 from fusion.core.ukf_stack import stackable as ukf_stackable
 from fusion.errors import NumericalError
 from fusion.tracking.controls import InputTimeline
@@ -59,9 +61,14 @@ class _Batched(ABC):
         """The prediction of tracks (indices into ts) to t_ns, as stacks."""
 
     @abstractmethod
-    def _update(self, pred: object, rows: np.ndarray, Z: Array, R: Array, model: MeasurementModel
-                ) -> tuple[Array, Part]:
-        """(log-likelihood, the stacked answers) for predicted rows `rows` and measurements Z."""
+    def _innovate(self, pred: object, rows: np.ndarray, Z: Array, R: Array, model: MeasurementModel
+                  ) -> tuple[Array, Array, object]:
+        """(NIS, log-likelihood, what the posterior needs) for predicted rows `rows` and
+        measurements Z: the half of the update a gate decides on."""
+
+    @abstractmethod
+    def _finish(self, inner: object, keep: np.ndarray) -> Part:
+        """The stacked answers of the pairs `keep` (indices into the innovated pairs)."""
 
     def predict(self, ts: TrackSet, t_ns: int, rows: np.ndarray) -> tuple[Array, Array, Array | None]:
         if rows.size == 0:
@@ -87,11 +94,13 @@ class _Batched(ABC):
                 if not model.broadcasts:
                     raise NumericalError("not stackable")
                 at = meas.at[js]
-                ll, part = self._update(pred, row[sel], meas.Z[dim][at], meas.Rs[dim][at], model)
+                nis, ll, inner = self._innovate(pred, row[sel], meas.Z[dim][at], meas.Rs[dim][at], model)
+                keep = np.flatnonzero(nis <= self.g[dim])  # the posterior of kept pairs only
+                part = self._finish(inner, keep)
             except NumericalError:  # a non-PD S somewhere in the group, or a model that takes one state
                 kept.add_gated(self._each.gate(ts, t_ns, ci[sel], js, meas))
                 continue
-            kept.add_part(ci[sel], js, part.nis, ll, dim, self.g[dim], part)
+            kept.add_part(ci[sel][keep], js[keep], nis[keep], ll[keep], dim, self.g[dim], part)
         return kept.done()
 
 
@@ -115,15 +124,22 @@ class BatchedGate(_Batched):
                     Xp[t0 == t] += d
         return Xp, Pp
 
-    def _update(self, pred: object, rows: np.ndarray, Z: Array, R: Array, model: MeasurementModel
-                ) -> tuple[Array, Part]:
+    def _innovate(self, pred: object, rows: np.ndarray, Z: Array, R: Array, model: MeasurementModel
+                  ) -> tuple[Array, Array, object]:
         Xp, Pp = pred[0][rows], pred[1][rows]  # type: ignore[index]
         Y = model.residual(Z, model.h(Xp))
         H = np.broadcast_to(model.jacobian(Xp), (rows.size, Z.shape[1], Xp.shape[1]))
-        ok, Xn, Pn, S, nis, ll = update_stack(Xp, Pp, Y, H, R)
+        ok, S, nis, ll = innovate_stack(Pp, Y, H, R)
         if not ok.all():
             raise NumericalError("an innovation covariance S is not positive definite")
-        return ll, Part(Xn, Pn, Xp, Pp, Y, S, H, nis)
+        return nis, ll, (Xp, Pp, Y, H, np.broadcast_to(R, S.shape), S)
+
+    def _finish(self, inner: object, keep: np.ndarray) -> Part:
+        Xp, Pp, Y, H, R, S = (a[keep] for a in inner)  # type: ignore[attr-defined]
+        ok, Xn, Pn, _, nis, _ = update_stack(Xp, Pp, Y, H, R)
+        if not ok.all():
+            raise NumericalError("an innovation covariance S is not positive definite")
+        return Part(Xn, Pn, Xp, Pp, Y, S, H, nis)
 
 
 class BatchedIMMGate(_Batched):
@@ -135,12 +151,19 @@ class BatchedIMMGate(_Batched):
         return predict_imm(self.filter, ts.MX[tracks], ts.MP[tracks], ts.MU[tracks],  # type: ignore[index]
                            (t_ns - ts.t_ns[tracks]) * 1e-9)
 
-    def _update(self, pred: object, rows: np.ndarray, Z: Array, R: Array, model: MeasurementModel
-                ) -> tuple[Array, Part]:
+    def _innovate(self, pred: object, rows: np.ndarray, Z: Array, R: Array, model: MeasurementModel
+                  ) -> tuple[Array, Array, object]:
         p: StackPrediction = pred  # type: ignore[assignment]
         sub = StackPrediction(p.xs[rows], p.Ps[rows], p.c[rows], p.x[rows], p.P[rows])
-        u = update_imm(sub, Z, R, model)
-        return u.loglik, Part(u.x, u.P, sub.x, sub.P, u.y, u.S, u.H, u.nis, u.xs, u.Ps, u.mu)
+        inn = innovate_imm(sub, Z, R, model)
+        return inn.nis, inn.loglik, (sub, inn, model)
+
+    def _finish(self, inner: object, keep: np.ndarray) -> Part:
+        sub, inn, model = inner  # type: ignore[misc]
+        xs, Ps, x, P = posterior_imm(sub, inn, keep)
+        px = sub.x[keep]
+        H = np.broadcast_to(model.jacobian(px), (keep.size, inn.y.shape[1], px.shape[1]))
+        return Part(x, P, px, sub.P[keep], inn.y[keep], inn.S[keep], H, inn.nis[keep], xs, Ps, inn.mu[keep])
 
 
 class BatchedUKFGate(_Batched):
@@ -152,11 +175,17 @@ class BatchedUKFGate(_Batched):
     def _predict(self, ts: TrackSet, t_ns: int, tracks: np.ndarray) -> tuple[Array, Array]:
         return predict_ukf(self.filter, ts.X[tracks], ts.P[tracks], (t_ns - ts.t_ns[tracks]) * 1e-9)
 
-    def _update(self, pred: object, rows: np.ndarray, Z: Array, R: Array, model: MeasurementModel
-                ) -> tuple[Array, Part]:
+    def _innovate(self, pred: object, rows: np.ndarray, Z: Array, R: Array, model: MeasurementModel
+                  ) -> tuple[Array, Array, object]:
         if not stackable_measurement(model):
             raise NumericalError("a measurement model whose mean does not stack")
         Xp, Pp = pred[0][rows], pred[1][rows]  # type: ignore[index]
-        Xn, Pn, Y, S, nis, ll = update_ukf(self.filter, Xp, Pp, Z, R, model)
-        H = np.broadcast_to(model.jacobian(Xp), (rows.size, Z.shape[1], Xp.shape[1]))
-        return ll, Part(Xn, Pn, Xp, Pp, Y, S, H, nis)
+        Y, S, nis, ll, rest = innovate_ukf(self.filter, Xp, Pp, Z, R, model)
+        return nis, ll, (Xp, Pp, model, Y, S, nis, rest)
+
+    def _finish(self, inner: object, keep: np.ndarray) -> Part:
+        Xp, Pp, model, Y, S, nis, rest = inner  # type: ignore[misc]
+        Xp, Pp, Y, S = Xp[keep], Pp[keep], Y[keep], S[keep]
+        Xn, Pn = posterior_ukf(self.filter, Xp, Pp, Y, S, tuple(a[keep] for a in rest))
+        H = np.broadcast_to(model.jacobian(Xp), (keep.size, Y.shape[1], Xp.shape[1]))
+        return Part(Xn, Pn, Xp, Pp, Y, S, H, nis[keep])

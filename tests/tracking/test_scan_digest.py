@@ -36,7 +36,7 @@ DIGESTS = {
 }
 
 
-def _arr(h: "hashlib._Hash", a: object) -> None:
+def _arr(h: hashlib._Hash, a: object) -> None:
     if a is None:
         h.update(b"N")
     else:
@@ -45,7 +45,7 @@ def _arr(h: "hashlib._Hash", a: object) -> None:
         h.update(v.tobytes())
 
 
-def _feed(h: "hashlib._Hash", r: StepResult) -> None:
+def _feed(h: hashlib._Hash, r: StepResult) -> None:
     for e in r.estimates:
         h.update(repr((e.track_id, e.t_ns, e.sensor_id, e.seq, e.status, e.revision, e.nis)).encode())
         for a in (e.x, e.P, e.y, e.S, e.mode_probabilities, e.meas_pos, e.prior_x, e.prior_P, e.H):
