@@ -7,6 +7,11 @@ revisions and retractions are applied the way a consumer applies them:
 - a TrackEvent is keyed by (kind, track_id, t_ns, reason); `retracted=True` withdraws it.
 Only Replay records and the arrival counts (replays, replayed scans, rescans, late_applied)
 describe how the data arrived, and they are named so.
+
+The per-measurement records (Estimate, TrackEvent, MeasuredPoint, Association) are frozen
+msgspec Structs without cyclic-GC tracking (they hold arrays, tuples and scalars, never
+themselves): built thousands of times per batch, they cost ~0.4 us each where a frozen
+dataclass cost ~3-5 us.
 """
 
 from __future__ import annotations
@@ -15,6 +20,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from enum import StrEnum
 
+import msgspec
 import numpy as np
 
 from fusion.core.checks import Array
@@ -49,8 +55,7 @@ class Outcome(StrEnum):
     CAPACITY = "capacity"  # no track could be started: max_tracks reached
 
 
-@dataclass(frozen=True, slots=True)
-class Estimate:
+class Estimate(msgspec.Struct, frozen=True, gc=False):
     """A track's posterior after a scan, or its retraction (status "retracted", empty x and P).
 
     prior_x, prior_P: the prediction to t_ns; y, S: innovation and its covariance; H: the
@@ -92,8 +97,7 @@ class Estimate:
                    None, None, None)
 
 
-@dataclass(frozen=True, slots=True)
-class TrackEvent:
+class TrackEvent(msgspec.Struct, frozen=True, gc=False):
     """born | confirmed | coasting | deleted (with its reason), at the time of the scan that
     caused it.
     retracted=True withdraws an event reported earlier (a replay no longer produces it)."""
@@ -112,8 +116,7 @@ class TrackEvent:
         return TrackEvent(self.kind, self.track_id, self.t_ns, self.reason, True)
 
 
-@dataclass(frozen=True, slots=True)
-class MeasuredPoint:
+class MeasuredPoint(msgspec.Struct, frozen=True, gc=False):
     """A newly accepted measurement, in world Cartesian coordinates (for recordings)."""
 
     sensor_id: str
@@ -122,8 +125,7 @@ class MeasuredPoint:
     position: Array
 
 
-@dataclass(frozen=True, slots=True)
-class Association:
+class Association(msgspec.Struct, frozen=True, gc=False):
     """What became of one accepted measurement in its scan, and the tracks in whose gate it fell."""
 
     sensor_id: str
