@@ -93,24 +93,22 @@ def coarse_pairs(
 
 def gnn_assign(
     ti: np.ndarray, mj: np.ndarray, cost: Array, limit: Array, *, n_tracks: int, n_meas: int
-) -> list[tuple[int, int]]:
+) -> np.ndarray:
     """Optimal assignment over gated pairs (ti[p], mj[p]) with cost[p] and limit[p] (see the
-    module docstring). Returns (track, measurement) pairs sorted by measurement."""
+    module docstring). Returns the positions p of the chosen pairs, sorted by (mj[p], ti[p])."""
     if ti.size == 0:
-        return []
+        return np.zeros(0, dtype=np.intp)
     cost = np.asarray(cost, dtype=np.float64)
     limit = np.asarray(limit, dtype=np.float64)
     if np.bincount(ti).max() == 1 and np.bincount(mj).max() == 1:  # every pair its own component
-        take = cost < limit
-        return sorted(zip(ti[take].tolist(), mj[take].tolist(), strict=True), key=lambda p: (p[1], p[0]))
+        return _by_measurement(np.flatnonzero(cost < limit), ti, mj)
     g = coo_matrix((np.ones(ti.size), (ti, n_tracks + mj)), shape=(n_tracks + n_meas,) * 2)
     _, labels = connected_components(g, directed=False)
     comp = labels[ti]
     sizes = np.bincount(comp, minlength=labels.max() + 1)
     # Components with one gated pair (the common case) are decided at once: take it if it wins.
     single = sizes[comp] == 1
-    take = single & (cost < limit)
-    out: list[tuple[int, int]] = list(zip(ti[take].tolist(), mj[take].tolist(), strict=True))
+    out = [np.flatnonzero(single & (cost < limit))]
     big = 1e18
     rest = np.flatnonzero(~single)
     if rest.size:
@@ -126,9 +124,15 @@ def gnn_assign(
             C[np.arange(a), b + np.arange(a)] = miss_cost  # track i left free
             C[a + np.arange(b), np.arange(b)] = miss_cost  # measurement j left free
             C[a:, b:] = 0.0
+            where = np.full((a, b), -1, dtype=np.intp)
+            where[it, im] = sel
             r, k = linear_sum_assignment(C)
-            for rr, kk in zip(r.tolist(), k.tolist(), strict=True):
-                if rr < a and kk < b and C[rr, kk] < big:
-                    out.append((int(ut[rr]), int(um[kk])))
-    out.sort(key=lambda p: (p[1], p[0]))
-    return out
+            real = (r < a) & (k < b)
+            r, k = r[real], k[real]
+            out.append(where[r, k][C[r, k] < big])
+    return _by_measurement(np.concatenate(out), ti, mj)
+
+
+def _by_measurement(p: np.ndarray, ti: np.ndarray, mj: np.ndarray) -> np.ndarray:
+    """Pair positions p sorted by (mj[p], ti[p])."""
+    return p[np.lexsort((ti[p], mj[p]))].astype(np.intp)

@@ -94,8 +94,8 @@ class Measured:
             rows = np.flatnonzero(dims == m)
             at[rows] = np.arange(rows.size)
             rl = rows.tolist()
-            Zs[m] = np.stack([z[j] for j in rl])
-            Rs[m] = np.stack([R[j] for j in rl])
+            Zs[m] = np.array([z[j] for j in rl], dtype=np.float64)
+            Rs[m] = np.array([R[j] for j in rl], dtype=np.float64)
         return cls(z, models, R, Zs, Rs, dims, at)
 
 
@@ -126,15 +126,22 @@ class Gated:
         where = self.where[pairs] if k else np.zeros((0, 2), dtype=np.intp)
         px: list[Array] = [None] * k  # type: ignore[list-item]
         pP, ys, Ss, Hs = list(px), list(px), list(px), list(px)
-        for g in np.unique(where[:, 0]).tolist():
+        groups = np.unique(where[:, 0]).tolist()
+        for g in groups:
             at = np.flatnonzero(where[:, 0] == g)
             rows = where[at, 1]
             part = self.parts[g]
             X[at], P[at] = part.X[rows], part.P[rows]
             if imm:
                 MX[at], MP[at], MU[at] = part.MX[rows], part.MP[rows], part.MU[rows]  # type: ignore[index]
-            for a, r in zip(at.tolist(), rows.tolist(), strict=True):
-                px[a], pP[a], ys[a], Ss[a], Hs[a] = part.prior_x[r], part.prior_P[r], part.y[r], part.S[r], part.H[r]
+            review = (list(part.prior_x[rows]), list(part.prior_P[rows]), list(part.y[rows]), list(part.S[rows]),
+                      list(part.H[rows]))
+            if len(groups) == 1:  # every pair from one part: the rows in order
+                px, pP, ys, Ss, Hs = review
+                break
+            for out, rows_of in zip((px, pP, ys, Ss, Hs), review, strict=True):
+                for a, v in zip(at.tolist(), rows_of, strict=True):
+                    out[a] = v
         return Taken(X, P, MX, MP, MU, px, pP, ys, Ss, Hs)
 
 

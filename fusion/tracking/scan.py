@@ -22,7 +22,7 @@ import numpy as np
 
 from fusion.core.association import coarse_pairs, gnn_assign
 from fusion.core.checks import Array
-from fusion.core.imm import IMM, Filter
+from fusion.core.imm import IMM, Filter, combine
 from fusion.tracking.detection import Detection
 from fusion.tracking.gating import Gated, Gater, Measured
 from fusion.tracking.lifecycle import Lifecycle
@@ -145,29 +145,34 @@ def _births_and_associations(ts: TrackSet, key: ScanKey, dets: tuple[Detection, 
     Soup's initiator takes every unassociated detection: the tentative track it starts dies
     unless the data keep it, and a confirmed track is never outbid by it)."""
     t_ns, sensor_id = key
-    ids, gti, nis = ts.ids.tolist(), gated.ti.tolist(), gated.nis.tolist()
-    gated_by: dict[int, list[int]] = {}
-    for i, j in zip(gti, gated.mj.tolist(), strict=True):
-        gated_by.setdefault(j, []).append(ids[i])
+    M = len(dets)
+    # pairs are sorted by measurement: measurement j's gated tracks are pairs lo[j]:hi[j]
+    bounds = np.searchsorted(gated.mj, np.arange(M + 1)).tolist()
+    gids = ts.ids[gated.ti].tolist()
+    nis = gated.nis.tolist()
     assoc: list[Association] = []
     births: list[int] = []
     room = ctx.max_tracks - len(ts)
+    unassigned = refused = 0
     for j, d in enumerate(dets):
-        near = tuple(gated_by.get(j, ()))
+        lo, hi = bounds[j], bounds[j + 1]
+        near = tuple(gids[lo:hi])
         p = taken.get(j)
         if p is not None:
-            assoc.append(Association(sensor_id, t_ns, d.seq, Outcome.UPDATED, ids[gti[p]], nis[p], near))
+            assoc.append(Association(sensor_id, t_ns, d.seq, Outcome.UPDATED, gids[p], nis[p], near))
             continue
         if near:  # in a gate, but no track took it
-            tally[Tally.UNASSIGNED] += 1
+            unassigned += 1
         if len(births) >= room:
             assoc.append(Association(sensor_id, t_ns, d.seq, Outcome.UNASSIGNED if near else Outcome.CAPACITY,
                                      None, None, near))
-            tally[Tally.BIRTHS_REFUSED_CAPACITY] += 1
+            refused += 1
         else:
             births.append(j)
             assoc.append(Association(sensor_id, t_ns, d.seq, Outcome.BORN,
                                      track_id_for(sensor_id, d.seq, t_ns), None, near))
+    tally[Tally.UNASSIGNED] += unassigned
+    tally[Tally.BIRTHS_REFUSED_CAPACITY] += refused
     return assoc, _born_rows(ts, [dets[j] for j in births], mpos[births], sm, ctx), births
 
 
@@ -180,9 +185,8 @@ def _assign_confirmed_first(g: Gated, ts: TrackSet, n_meas: int) -> list[int]:
     if g.ti.size == 0:
         return []
     conf = ts.status[g.ti] == Status.CONFIRMED
-    out: list[int] = []
+    out: list[np.ndarray] = []
     taken = np.zeros(n_meas, dtype=bool)
-    ti, mj = g.ti.tolist(), g.mj.tolist()
     for stage, likelihood in ((conf, True), (~conf, False)):
         sel = np.flatnonzero(stage & ~taken[g.mj])
         if sel.size == 0:
@@ -191,12 +195,11 @@ def _assign_confirmed_first(g: Gated, ts: TrackSet, n_meas: int) -> list[int]:
         if not likelihood:  # tentative tracks: Mahalanobis distance sqrt(NIS) against sqrt(gate)
             nis = g.nis[sel]
             cost, limit = np.sqrt(nis), np.sqrt(limit - cost + nis)
-        chosen = gnn_assign(g.ti[sel], g.mj[sel], cost, limit, n_tracks=len(ts), n_meas=n_meas)
-        index = {(ti[p], mj[p]): p for p in sel.tolist()}
-        for i, j in chosen:
-            out.append(index[(i, j)])
-            taken[j] = True
-    return sorted(out, key=lambda p: (mj[p], ti[p]))
+        chosen = sel[gnn_assign(g.ti[sel], g.mj[sel], cost, limit, n_tracks=len(ts), n_meas=n_meas)]
+        out.append(chosen)
+        taken[g.mj[chosen]] = True
+    # pairs are sorted by (measurement, track): their positions in that order
+    return np.sort(np.concatenate(out)).tolist() if out else []
 
 
 def _measured_points(sm: SensorModel, meas: Measured) -> tuple[Array, Array]:
@@ -225,11 +228,12 @@ def _born_rows(ts: TrackSet, born: list[Detection], pos: Array, sm: SensorModel,
         P[b][np.ix_(pi, pi)] = sm.position_cov(d.z, d.R)  # type: ignore[arg-type]
     P = 0.5 * (P + np.swapaxes(P, -1, -2))
     MX = MP = MU = None
-    if isinstance(ctx.filter, IMM):  # x and P are built from validated input
-        states = [ctx.filter.initial(X[b], P[b], t_ns=d.t_ns) for b, d in enumerate(born)]
-        X, P = np.stack([s.x for s in states]), np.stack([s.P for s in states])
-        MX, MP, MU = (np.stack([s.xs for s in states]), np.stack([s.Ps for s in states]),
-                      np.stack([s.mu for s in states]))
+    if isinstance(ctx.filter, IMM):  # every mode starts at (x, P), equally likely (IMM.initial)
+        M = len(ctx.filter.filters)
+        MU = np.full((k, M), 1.0 / M)
+        MX, MP = np.repeat(X[:, None], M, axis=1), np.repeat(P[:, None], M, axis=1)
+        for b in range(k):  # their combination, by the IMM's own arithmetic
+            X[b], P[b] = combine(MX[b], MP[b], MU[b])
     t = np.array([d.t_ns for d in born], dtype=np.int64)
     seq = np.array([d.seq for d in born], dtype=np.int64)
     sensor = np.full(k, sm.index, np.int32)
