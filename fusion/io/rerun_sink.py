@@ -25,7 +25,8 @@ z = 0 plane; track labels are fusion.io.labels.short_id of the id):
                          ellipse (ellipsoid in 3-D), start and end markers
   tracks/<label>/...     a viewed track's time series (see fusion.io.blueprint.TRACK_VIEWS)
   metrics/{ospa,gospa}   set distances to truth (fusion.io.derive), counts/<name>: the tracker's counters
-  meta                   static JSON: layout, position/velocity indices, sensors
+  meta                   static JSON: layout, position/velocity indices, sensors, run_id (one per
+                         tracker run: the files of a rotated set share it; `fusion inspect` groups by it)
 Timelines: `t` (sensor time: a duration from the stream's start, or a timestamp for epoch times),
 `step` (tracker call counter), `arrival` (arrival time of the data that produced the row).
 """
@@ -34,6 +35,7 @@ from __future__ import annotations
 
 import json
 import time
+import uuid
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
@@ -63,6 +65,7 @@ class RerunSink:
         velocity_indices: tuple[int, ...], recording_id: str = "fusion", application_id: str = "fusion",
         flush_rows: int = 200_000, flush_interval_s: float = 0.5, view_interval_s: float = 5.0,
         meta: Mapping[str, Any] | None = None, counts: Callable[[], Mapping[str, int]] | None = None,
+        run_id: str | None = None,
     ) -> None:
         import rerun as rr
 
@@ -91,8 +94,10 @@ class RerunSink:
         self._styled: set[str] = set()
         self._layout_key: tuple = ()
         self._closed = False
+        self.run_id = run_id or uuid.uuid4().hex  # a new run unless continuing one (fusion.io.recording)
         info = {"layout": list(layout), "position_indices": list(position_indices),
-                "velocity_indices": list(velocity_indices), "labels": "fusion.io.labels.short_id", **(meta or {})}
+                "velocity_indices": list(velocity_indices), "labels": "fusion.io.labels.short_id", **(meta or {}),
+                "run_id": self.run_id}
         self.rec.log("meta", rr.TextDocument(json.dumps(info, sort_keys=True), media_type="text/plain"), static=True)
         # the names of an IMM's modes for their probability series (meta "modes"; else "mode j")
         self.mode_names: tuple[str, ...] = tuple(str(n) for n in (meta or {}).get("modes", ()))

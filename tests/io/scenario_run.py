@@ -46,10 +46,13 @@ def latest(results: list[StepResult]) -> dict[tuple[int, int, str], Estimate]:
     return out
 
 
-def record_scenario(name: str, path, *, duration_s: float | None = None, sink_factory=None):
+def record_scenario(name: str, path, *, duration_s: float | None = None, sink_factory=None, batch: int = 50,
+                    shuffle_seed: int | None = None):
     """The reference scenario `name` (configs/scenarios/<name>.toml) as the service runs it: its
     stream of samples (measurements and truth) through the Pipeline with a RerunSink writing
-    `path`. Returns the pipeline (its tracker and counts) after the sink is closed."""
+    `path`, `batch` samples per ingest; with `shuffle_seed`, the measurements of each block of 40
+    samples come in a seeded random order (more late arrivals; truth keeps its places). Returns the pipeline (its tracker and counts)
+    after the sink is closed."""
     import msgspec
 
     from fusion.io import wire
@@ -68,9 +71,18 @@ def record_scenario(name: str, path, *, duration_s: float | None = None, sink_fa
                      counts=lambda: pipe.counts().flat())  # type: ignore[union-attr]
     pipe = Pipeline(tracker, wire.Codec(sf.service.namespace), sink=sink)
     records = [(s.arrival_ns, s.key, s.payload) for s in samples]
+    if shuffle_seed is not None:
+        rng = np.random.default_rng(shuffle_seed)
+        meas = [i for i, r in enumerate(records) if "/truth/" not in r[1]]
+        order = list(range(len(records)))
+        for b in range(0, len(meas), 40):
+            block = meas[b:b + 40]
+            for i, j in zip(block, rng.permutation(block).tolist(), strict=True):
+                order[i] = j
+        records = [records[j] for j in order]
     try:
-        for i in range(0, len(records), 50):
-            pipe.ingest(records[i:i + 50])
+        for i in range(0, len(records), batch):
+            pipe.ingest(records[i:i + batch])
     finally:
         sink.close()
         pipe.warn.flush()  # its held-back warnings now, not in another test's flush_all
