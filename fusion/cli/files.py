@@ -80,8 +80,9 @@ def add(sub: Any, common: argparse.ArgumentParser) -> None:
     ip.add_argument("--json", action="store_true", help="print JSON for scripts instead of text")
     ip.add_argument("--runs", choices=("id", "files", "one"), default="id",
                     help="how files are told apart as independent runs: by the run id each recording carries "
-                         "(files without one are taken as one run), each file one run, or all files one run "
-                         "(e.g. a service restarted from a checkpoint starts a new run id) (default: id)")
+                         "(files without one are taken as one run), each file one run, or all files pieces of one "
+                         "run (a service restarted from a checkpoint starts a new run id but continues its tracks; "
+                         "independent runs merged so would mix tracks that share ids) (default: id)")
     ip.set_defaults(func=inspect)
 
 

@@ -174,11 +174,11 @@ class _Scores:
                 continue
             self.tracks.append(self._track(run, tid, conf, est, pos_idx))
         conf_rows = [i for i in rows if est["status"][i] == "confirmed"]
-        if rd.truth and pos_idx and conf_rows:
+        truth = rd.truth_points(pos_idx) if pos_idx else {}
+        if truth and conf_rows:
             t = np.asarray([est["t"][i] for i in conf_rows], dtype=np.int64)
             W = derive.world(np.asarray([est["x"][i] for i in conf_rows])[:, pos_idx])
             scan = np.asarray(sorted(rd.scan_t | set(est["t"][i] for i in rows)), dtype=np.int64)
-            truth = {tt: np.asarray(p, dtype=np.float64) for tt, p in rd.truth.items()}
             o, g = derive.set_distance_series(t, np.asarray([est["track"][i] for i in conf_rows]), W, truth, scan,
                                               max_points=OSPA_MAX_POINTS)
             self.ospa += o.tolist()

@@ -51,7 +51,8 @@ class RunRecord:
         self.sensors: dict[str, int] = defaultdict(int)
         self.events: dict[str, int] = defaultdict(int)
         self.counts: dict[str, tuple[int, int]] = {}  # name -> (t, value)
-        self.truth: dict[int, list[list[float]]] = defaultdict(list)  # t -> true positions (world, 3-D)
+        self.truth: dict[int, list[list[float]]] = defaultdict(list)  # t -> true states (record/truth)
+        self.truth_world: dict[int, list[list[float]]] = defaultdict(list)  # t -> world/truth (float32)
         self.scan_t: set[int] = set()  # times of accepted measurements
         self.meta: dict[str, object] = {}
         self.t: list[int] = []
@@ -78,9 +79,12 @@ class RunRecord:
                 for kind, retracted in zip(b.column("kind").to_pylist(), b.column("retracted").to_pylist(),
                                            strict=True):
                     self.events[("withdrawn " if retracted[0] else "") + kind[0]] += 1
+            elif ent == "/record/truth":
+                for tt, x in zip(t.tolist(), b.column("x").to_pylist(), strict=True):
+                    self.truth[tt].append(x)
             elif ent == "/world/truth" and "Points3D:positions" in names:
                 for tt, pts in zip(t.tolist(), b.column("Points3D:positions").to_pylist(), strict=True):
-                    self.truth[tt].extend(pts)
+                    self.truth_world[tt].extend(pts)
             elif ent.startswith("/world/meas/") and "Points3D:positions" in names:
                 self.sensors[ent.rsplit("/", 1)[1]] += sum(len(x) for x in b.column("Points3D:positions").to_pylist())
             elif ent.startswith("/counts/") and "Scalars:scalars" in names:
@@ -89,6 +93,15 @@ class RunRecord:
                 name = ent[len("/counts/"):]
                 if name not in self.counts or int(t[i]) >= self.counts[name][0]:
                     self.counts[name] = (int(t[i]), int(v[i][0]))
+
+    def truth_points(self, pos_idx: list[int]) -> dict[int, np.ndarray]:
+        """True positions per time as world points (3-D): from record/truth (float64), or from
+        world/truth (float32) in recordings from before record/truth."""
+        from fusion.io.derive import world
+
+        if self.truth:
+            return {t: world(np.asarray(x, dtype=np.float64)[:, pos_idx]) for t, x in self.truth.items()}
+        return {t: np.asarray(p, dtype=np.float64) for t, p in self.truth_world.items()}
 
     def latest(self) -> list[int]:
         """Row indices of the latest revision of each estimate (track, time, sensor), retractions

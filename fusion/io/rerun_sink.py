@@ -15,6 +15,7 @@ z = 0 plane; track labels are fusion.io.labels.short_id of the id):
                          x, std = sqrt(diag P), nis, nis_dof, nees, nees_dof, error, target (what
                          `fusion inspect` reads; NaN where a value does not apply)
   record/associations    every accepted measurement: sensor, seq, outcome, track label, gated labels, nis
+  record/truth           every true state logged: target, x (in the tracker's layout, float64)
   record/events          births, confirmations, coasting, deletions (with reason), withdrawals,
                          replays and refusals: kind, track, label, reason, retracted, detail
   events                 the same as human-readable lines (TextLog)
@@ -78,7 +79,7 @@ class RerunSink:
         self.ndim = len(position_indices)
         self._cols: dict[str, Column] = {}
         self._est: list[tuple[Estimate, int, int]] = []
-        self._truth_rows: list[tuple[int, int, Array]] = []
+        self._truth_rows: list[tuple[int, int, Array, str]] = []
         self._pending = 0
         self.rows_written = 0
         self._flush_rows = flush_rows
@@ -137,7 +138,7 @@ class RerunSink:
         """A true state in the tracker's layout; kept to score estimates at the same t_ns (the
         world/truth rows are built at flush, in one block)."""
         s = self.rows.add_truth(target_id, t_ns, state)
-        self._truth_rows.append((t_ns, self._step, s))
+        self._truth_rows.append((t_ns, self._step, s, target_id))
         self._pending += 1
 
     def log_text(self, t_ns: int, text: str, level: str = "INFO") -> None:
@@ -217,7 +218,10 @@ class RerunSink:
         truth, self._truth_rows = self._truth_rows, []
         if truth:
             t_t = [r[0] for r in truth]
-            W = world(np.stack([r[2] for r in truth])[:, self.rows.pi])
+            S = np.stack([r[2] for r in truth])
+            self.col("record/truth", "record").extend(t_t, [r[1] for r in truth], t_t, blocks={"x": S},
+                                                      target=[r[3] for r in truth])  # float64: for inspect
+            W = world(S[:, self.rows.pi])
             self.col("world/truth", "points", rgba=colour("truth"), radius=-1.5).extend(
                 t_t, [r[1] for r in truth], t_t, p=list(W[:, None, :]))
         self.rows.derive(est, self)

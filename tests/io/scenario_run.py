@@ -87,3 +87,25 @@ def record_scenario(name: str, path, *, duration_s: float | None = None, sink_fa
         sink.close()
         pipe.warn.flush()  # its held-back warnings now, not in another test's flush_all
     return pipe
+
+
+def record_maneuver(path, *, seed: int = 3, batch: int = 1, sink=None) -> tuple[list[StepResult], dict]:
+    """maneuver_run(seed) through the tracker, `batch` detections per step, into a RerunSink at
+    `path` (or into `sink`, e.g. a RotatingSink), truth logged first. Returns (results, truth)."""
+    from fusion.io.rerun_sink import RerunSink
+
+    tr, dets, truth = maneuver_run(seed=seed)
+    out = sink if sink is not None else RerunSink(
+        path, layout=tr.layout, position_indices=tr.position_indices, velocity_indices=tr.velocity_indices,
+        counts=lambda: tr.counts.flat())
+    results = []
+    try:
+        for t, x in sorted(truth.items()):
+            out.log_truth("target", t, x)
+        for i in range(0, len(dets), batch):
+            r = tr.process(dets[i:i + batch])
+            results.append(r)
+            out.log_step(r)
+    finally:
+        out.close()
+    return results, truth
