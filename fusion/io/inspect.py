@@ -86,7 +86,7 @@ class Summary:
                 if not k.startswith("withdrawn ") and k != "replay" and v - ev.get(f"withdrawn {k}", 0)}
 
     def to_json(self) -> str:
-        return json.dumps(asdict(self), indent=2, sort_keys=True)
+        return json.dumps({**asdict(self), "events_net": self.events_net}, indent=2, sort_keys=True)
 
 
 def expand(inputs: list[str | Path]) -> list[Path]:

@@ -51,8 +51,8 @@ def record_scenario(name: str, path, *, duration_s: float | None = None, sink_fa
     """The reference scenario `name` (configs/scenarios/<name>.toml) as the service runs it: its
     stream of samples (measurements and truth) through the Pipeline with a RerunSink writing
     `path`, `batch` samples per ingest; with `shuffle_seed`, the measurements of each block of 40
-    samples come in a seeded random order (more late arrivals; truth keeps its places). Returns the pipeline (its tracker and counts)
-    after the sink is closed."""
+    samples come in a seeded random order (more late arrivals; truth keeps its places). Returns the
+    pipeline (its tracker and counts) after the sink is closed."""
     import msgspec
 
     from fusion.io import wire

@@ -19,7 +19,6 @@ from fusion.io.inspect import format_summary, summarise
 from fusion.io.inspect_read import file_meta
 from fusion.io.recording import RotatingSink
 from fusion.io.rrd_read import read_chunks
-from fusion.tracking.tracker import Tracker
 from tests.io.scenario_run import latest, maneuver_run, record_maneuver, record_scenario
 
 ROOT = Path(__file__).resolve().parents[2]
