@@ -21,8 +21,11 @@ effective samples) unless it lies outside even the widest interval, that of one 
 sample per sequence (tau = L), where it is "too high" / "too low" whatever tau is. Several
 sequences (independent runs, or independent targets) show the persistent part as differences
 between their means, which the pooled estimate about the common mean sees.
-Measured (tests/io/test_inspect_verdicts.py): one run of radar2d holds about 2 effectively
-independent NEES samples (from the spread of run means over 400 seeds), one run of cv1d_a about 5.
+From the spread of the run means over 400 seeds (the runs of tests/io/test_inspect_verdicts.py),
+one run of radar2d with the start drawn from the prior holds about 2 effectively independent NEES
+samples (tau ~ 107 of its 200 steps), one run of cv1d_a about 5 (tau ~ 21 of 100). Over the
+test's seeds, one run: radar2d 29 consistent, 11 inconclusive, no false alarm in 40; cv1d_a 32,
+8, none; 40 groups of 5 runs: 38 and 39 of 40 consistent.
 
 Independent runs of one scenario (Bar-Shalom's Monte Carlo test, `per_time`): at each time held by
 all N runs, the sum of the N runs' values is chi2(sum of their dofs), i.e. the run-averaged NEES
