@@ -144,7 +144,8 @@ def test_identical_runs_give_identical_figures(tmp_path: Path) -> None:
         record_scenario("mix", tmp_path / f"run{k}.rrd", duration_s=10.0)
     a, b = summarise(tmp_path / "run1.rrd"), summarise(tmp_path / "run2.rrd")
     assert a.events.get("replay", 0) > 0, "no replays: the case this guards is not exercised"
-    for field_ in ("tracks", "position_rmse", "nis", "nees", "sensors", "tentative_only", "counts", "ospa_m", "gospa_m"):
+    for field_ in ("tracks", "position_rmse", "nis", "nees", "sensors", "tentative_only", "counts", "ospa_m",
+                   "gospa_m"):
         assert getattr(a, field_) == getattr(b, field_), field_
 
 
