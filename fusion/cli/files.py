@@ -36,13 +36,21 @@ NEES with chi-square verdicts that allow for time correlation (and say what they
 of late, duplicate and refused samples, events. Only the latest revision of each estimate counts.
 Takes one file, several, a folder or a glob: the files of a rotated recording are merged in time
 order, and any one of them is summarised on its own. Works on the file of a crashed service too.
-To look at it: rerun FILE."""
+Several runs: every recording carries the id of the tracker run that wrote it (the files of a
+rotated set share it). Files of different runs are taken as independent runs of the same scenario
+(e.g. fusion replay of one scenario's streams with seeds 0..N-1 into separate files): tracks are
+listed per run and NIS/NEES are averaged over the runs (the run-averaged NEES at each time is
+chi2(n N) / N, and the time average is tested with its correlation-aware interval). One run of a
+slowly forgetting filter may hold too few independent samples: its verdict then says
+"inconclusive: N effective samples". To look at it: rerun FILE."""
 
 INSPECT_EXAMPLES = """\
 examples:
   fusion inspect recordings/mix.rrd
   fusion inspect recordings/mix.rrd --json | python -m json.tool
-  fusion inspect recordings/service/          # every file of a rotated recording"""
+  fusion inspect recordings/service/          # every file of a rotated recording
+  fusion inspect runs/seed-*.rrd              # independent runs: verdicts averaged over them
+  fusion inspect old/*.rrd --runs files       # recordings without run ids, one run per file"""
 
 
 def add(sub: Any, common: argparse.ArgumentParser) -> None:
@@ -70,6 +78,11 @@ def add(sub: Any, common: argparse.ArgumentParser) -> None:
                     help="recordings (.rrd) written by fusion serve, demo or replay: files, a folder or a glob "
                          "(a rotated set is merged in time order)")
     ip.add_argument("--json", action="store_true", help="print JSON for scripts instead of text")
+    ip.add_argument("--runs", choices=("id", "files", "one"), default="id",
+                    help="how files are told apart as independent runs: by the run id each recording carries "
+                         "(files without one are taken as one run), each file one run, or all files pieces of one "
+                         "run (a service restarted from a checkpoint starts a new run id but continues its tracks; "
+                         "independent runs merged so would mix tracks that share ids) (default: id)")
     ip.set_defaults(func=inspect)
 
 
@@ -139,7 +152,7 @@ def inspect(args: argparse.Namespace) -> int:
         a.input_file(p, "recording", "fusion demo writes recordings/<scenario>.rrd")
         _check_kind(p, RRD_MAGIC)
     try:
-        s = summarise(paths)
+        s = summarise(paths, runs_by=args.runs)
     except RuntimeError as e:
         raise CliError(Exit.FILE, f"{' '.join(map(str, paths))}: cannot read this recording: {e}") from None
     print(s.to_json() if args.json else format_summary(s))

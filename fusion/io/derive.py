@@ -132,3 +132,30 @@ def nees(E: Array, P: Array, ki: list[int]) -> Array:
 def set_distances(points: Array, truth_points: Array) -> tuple[float, float]:
     """(OSPA, GOSPA) between estimated and true positions, order 2, cut-off OSPA_C_M metres."""
     return ospa(points, truth_points, c=OSPA_C_M), gospa(points, truth_points, c=OSPA_C_M)
+
+
+def set_distance_series(t_ns: Array, track: Array, W: Array, truth: dict[int, Array], scan_t: Array, *,
+                        max_points: int) -> tuple[Array, Array]:
+    """OSPA and GOSPA (set_distances) at each scan time in `scan_t` that has truth: the positions W
+    (k, 3) of the estimates at that time (rows t_ns, track; the last row of a track at a time
+    counts, the caller orders them) against truth[t] (j, 3). Times where either set has more than
+    `max_points` points are left out (the assignment is cubic). Returns (ospa, gospa) per time."""
+    order = np.lexsort((np.arange(t_ns.size), t_ns))
+    ts = t_ns[order]
+    starts = np.searchsorted(ts, scan_t, side="left")
+    ends = np.searchsorted(ts, scan_t, side="right")
+    ospa_v: list[float] = []
+    gospa_v: list[float] = []
+    for t, a, b in zip(scan_t.tolist(), starts.tolist(), ends.tolist(), strict=True):
+        T = truth.get(t)
+        if T is None:
+            continue
+        rows = order[a:b]
+        last = {int(k): int(i) for k, i in zip(track[rows].tolist(), rows.tolist(), strict=True)}
+        pts = W[sorted(last.values())] if last else np.empty((0, 3))
+        if len(pts) > max_points or len(T) > max_points:
+            continue
+        o, g = set_distances(pts, T)
+        ospa_v.append(o)
+        gospa_v.append(g)
+    return np.asarray(ospa_v), np.asarray(gospa_v)

@@ -3,23 +3,20 @@
 Input: one file, or a set (the files of a rotated recording, a folder, a glob), merged in time
 order. Each file is read with rerun's own reader (fusion.io.rrd_read: a file without its footer is
 scanned whole, a file cut inside a frame is read up to its last complete frame). The figures come
-from the data of record (`record/estimates`, `record/events`: columns, no text is parsed), which
-every file of a rotated set holds for its own rows, so any one file is summarised on its own.
+from the data of record (fusion.io.inspect_read), which every file of a rotated set holds for its
+own rows, so any one file is summarised on its own.
+
+Runs: files are grouped into runs by the run id each recording carries (the files of a rotated
+set share one; see fusion.io.inspect_read.run_key for the other ways). Several runs are taken as
+independent runs of the same scenario: their tracks are listed apart (a `run` column) and the
+NIS/NEES verdicts average over them (fusion.io.verdicts: Bar-Shalom's N-run test at each time, and
+the time average with its correlation-aware interval).
 
 Only the latest revision of each estimate (track, time, sensor) counts, and a retraction removes
 it: identical runs give identical figures whatever the replays did. A track counts as confirmed
-when one of its estimates is.
-
-Consistency verdicts (NIS over the measurement dimension m_k of each update; NEES over the
-kinematic components n, see fusion.io.derive): for K independent samples sum(values) ~
-chi2(sum(dofs)). Estimation errors are correlated in time (NEES above all: a slowly forgetting
-filter carries its initial error for the whole run), so the samples are not independent: the
-verdict estimates the integrated autocorrelation time tau of the samples (each track's in time
-order; Geyer's initial positive sequence; about the sample mean, corrected for that estimator's
-low bias in runs of L samples, E[tau_hat] ~ tau (1 - tau / L)) and tests the mean against the interval of K / tau
-effectively independent samples: chi2.ppf((0.025, 0.975), sum(dofs) / tau) / (K / tau). White
-samples (NIS of a consistent filter) give tau ~ 1, the plain chi-square test. Several files of
-independent runs give more effectively independent samples. The verdict says what it assumed.
+when one of its estimates is. OSPA/GOSPA (fusion.io.derive.set_distance_series) are computed here
+from those latest revisions and the file's truth, at every scan time with truth: the confirmed
+estimates at that time (a track's last sensor's row) against the true positions.
 """
 
 from __future__ import annotations
@@ -32,9 +29,12 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
-from scipy.stats import chi2
 
+from fusion.io import derive
+from fusion.io.inspect_read import RunRecord, file_meta, run_key
 from fusion.io.rrd_read import FOOTER, read_chunks
+from fusion.io.track_rows import OSPA_MAX_POINTS
+from fusion.io.verdicts import Consistency, per_time, verdict
 
 
 @dataclass
@@ -47,16 +47,7 @@ class TrackSummary:
     mean_nis: float | None
     mean_nees: float | None
     full_id: int = 0
-
-
-@dataclass
-class Consistency:
-    samples: int
-    dof: int  # total degrees of freedom
-    mean: float | None  # mean value per sample
-    interval: tuple[float, float] | None  # 95 % interval of the mean per sample
-    verdict: str  # "consistent" | "too high" | "too low" | "no data"
-    assumes: str = ""
+    run: int = 1  # which run (1..N, in the order of the files) when several are given
 
 
 @dataclass
@@ -75,16 +66,27 @@ class Summary:
     nis: Consistency
     nees: Consistency
     counts: dict[str, int]
-    events: dict[str, int]
+    events: dict[str, int]  # as logged: every event, and every withdrawal ("withdrawn <kind>") by a replay
     meta: dict[str, object] = field(default_factory=dict)
     files: list[str] = field(default_factory=list)
-    # mean OSPA / GOSPA of the recording's metrics series: computed when logged, from the revisions
-    # known then, so (unlike every other figure here) they can differ between identical runs with replays
+    # mean OSPA / GOSPA over the scan times with truth, from the latest revisions (module docstring)
     ospa_m: float | None = None
     gospa_m: float | None = None
+    ospa_times: int = 0
+    runs: int = 1
+    runs_by: str = "id"  # how files were told apart as runs (fusion.io.inspect_read.run_key)
+    run_ids: list[str] = field(default_factory=list)
+
+    @property
+    def events_net(self) -> dict[str, int]:
+        """Events that stood after the replays (logged minus withdrawn), replays and refusals apart:
+        a function of the data, where `events` also counts what later replays withdrew."""
+        ev = self.events
+        return {k: v - ev.get(f"withdrawn {k}", 0) for k, v in ev.items()
+                if not k.startswith("withdrawn ") and k != "replay" and v - ev.get(f"withdrawn {k}", 0)}
 
     def to_json(self) -> str:
-        return json.dumps(asdict(self), indent=2, sort_keys=True)
+        return json.dumps({**asdict(self), "events_net": self.events_net}, indent=2, sort_keys=True)
 
 
 def expand(inputs: list[str | Path]) -> list[Path]:
@@ -101,114 +103,15 @@ def expand(inputs: list[str | Path]) -> list[Path]:
     return sorted(out)
 
 
-def autocorrelation_time(seqs: list[np.ndarray], mean: float) -> float:
-    """Integrated autocorrelation time tau = 1 + 2 sum_k rho_k of samples pooled over sequences
-    (each track's samples in time order), rho from the pooled autocovariance about `mean` (the
-    value under test: the sample mean would hide an error that persists for the whole run), by
-    FFT, the sum cut by Geyer's initial positive sequence (pairs rho_2m + rho_2m+1 summed while
-    positive). At least 1."""
-    seqs = [q for q in seqs if q.size > 1]
-    if not seqs:
-        return 1.0
-    mu = mean
-    n_max = max(q.size for q in seqs)
-    acov = np.zeros(n_max)
-    pairs = np.zeros(n_max)
-    for q in seqs:
-        x = q - mu
-        f = np.fft.rfft(x, 2 * q.size)
-        acov[: q.size] += np.fft.irfft(f * np.conj(f))[: q.size]
-        pairs[: q.size] += np.arange(q.size, 0, -1)
-    if acov[0] <= 0:
-        return 1.0
-    rho = (acov / pairs) / (acov[0] / pairs[0])
-    tau = -1.0
-    for m in range(n_max // 2):
-        g = rho[2 * m] + rho[2 * m + 1]
-        if g <= 0:
-            break
-        tau += 2.0 * g
-    return max(tau, 1.0)
-
-
-def verdict(values: np.ndarray, dofs: np.ndarray, seqs: list[np.ndarray] | None = None) -> Consistency:
-    """See the module docstring. values, dofs: per sample; seqs: the values per track in time order
-    (for the autocorrelation; one sequence of all values when not given)."""
-    k = int(values.size)
-    if k == 0:
-        return Consistency(0, 0, None, None, "no data", "")
-    total, dof = float(values.sum()), int(dofs.sum())
-    seqs_ = seqs if seqs is not None else [values]
-    tau_hat = autocorrelation_time(seqs_, float(values.mean()))
-    # about the sample mean, the estimate is biased low: E[tau_hat] ~ tau (1 - tau / L) for
-    # sequences of L samples; solved for tau (capped at L / 2)
-    L = float(np.mean([q.size for q in seqs_ if q.size > 1] or [k]))
-    tau = L / 2 * (1 - np.sqrt(1 - 4 * tau_hat / L)) if tau_hat < L / 4 else L / 2
-    tau = max(float(tau), 1.0)
-    k_eff = k / tau
-    nu = dof / tau  # chi-square degrees of freedom of the k_eff effectively independent samples
-    lo, hi = chi2.ppf(0.025, nu) / k_eff, chi2.ppf(0.975, nu) / k_eff
-    mean = total / k
-    verdict_ = "consistent" if lo <= mean <= hi else ("too high" if mean > hi else "too low")
-    return Consistency(k, dof, mean, (float(lo), float(hi)), verdict_,
-                       f"time-correlated samples: autocorrelation time {tau:.1f} samples, so {k_eff:.0f} "
-                       f"effectively independent ones; sum ~ chi2(sum of dofs / {tau:.1f}) scaled")
-
-
-class _Reader:
-    """What the summary needs from the chunks of one or more files."""
-
-    def __init__(self) -> None:
-        self.est: dict[str, list] = defaultdict(list)
-        self.sensors: dict[str, int] = defaultdict(int)
-        self.events: dict[str, int] = defaultdict(int)
-        self.counts: dict[str, tuple[int, int]] = {}  # name -> (t, value)
-        self.metrics: dict[str, list[float]] = defaultdict(list)
-        self.meta: dict[str, object] = {}
-        self.t: list[int] = []
-
-    def add(self, chunks: list) -> None:
-        for ch in chunks:
-            ent: str = ch.entity_path
-            b = ch.to_record_batch()
-            names = b.schema.names
-            if ent == "/meta" and "TextDocument:text" in names:
-                self.meta = json.loads(b.column("TextDocument:text").to_pylist()[0][0])
-                continue
-            if "t" not in names or not b.num_rows:
-                continue
-            t = b.column("t").cast("int64").to_numpy()
-            self.t.extend((int(t.min()), int(t.max())))
-            if ent == "/record/estimates":
-                self.est["t"].extend(t.tolist())
-                for k in ("track", "label", "sensor", "status", "revision", "nis", "nis_dof", "nees", "nees_dof"):
-                    self.est[k].extend(v[0] if v else None for v in b.column(k).to_pylist())
-                self.est["error"].extend(b.column("error").to_pylist())  # a vector per row (the batch itself)
-            elif ent == "/record/events":
-                for kind, retracted in zip(b.column("kind").to_pylist(), b.column("retracted").to_pylist(),
-                                           strict=True):
-                    self.events[("withdrawn " if retracted[0] else "") + kind[0]] += 1
-            elif ent.startswith("/world/meas/") and "Points3D:positions" in names:
-                self.sensors[ent.rsplit("/", 1)[1]] += sum(len(x) for x in b.column("Points3D:positions").to_pylist())
-            elif ent.startswith("/counts/") and "Scalars:scalars" in names:
-                v = b.column("Scalars:scalars").to_pylist()
-                i = int(np.argmax(t))
-                name = ent[len("/counts/"):]
-                if name not in self.counts or int(t[i]) >= self.counts[name][0]:
-                    self.counts[name] = (int(t[i]), int(v[i][0]))
-            elif ent.startswith("/metrics/") and "Scalars:scalars" in names:
-                self.metrics[ent[len("/metrics/"):]].extend(x[0] for x in b.column("Scalars:scalars").to_pylist())
-
-
-def summarise(path: str | Path | list[str | Path]) -> Summary:
+def summarise(path: str | Path | list[str | Path], *, runs_by: str = "id") -> Summary:
     """Read one recording or a set of them and summarise (see the module docstring)."""
     files = expand(path if isinstance(path, list) else [path])
     if not files:
         raise RuntimeError(f"no recordings in {path}")
-    rd = _Reader()
+    runs: dict[str, RunRecord] = {}
     size = dropped = 0
     complete = True
-    for p in files:
+    for i, p in enumerate(files):
         n = p.stat().st_size
         size += n
         with p.open("rb") as f:
@@ -216,74 +119,127 @@ def summarise(path: str | Path | list[str | Path]) -> Summary:
             complete &= FOOTER in f.read()
         chunks, lost = read_chunks(p)
         dropped += lost
-        rd.add(chunks)
-    pos_idx = [int(i) for i in rd.meta.get("position_indices", [])]  # type: ignore[union-attr]
-    tracks, all_sq, nis, nees, tentative = _tracks(rd.est, pos_idx)
-    t0 = min(rd.t) if rd.t else None
-    t1 = max(rd.t) if rd.t else None
-    allsq = np.concatenate(all_sq) if all_sq else np.empty(0)
-    mean = lambda v: float(np.mean(v)) if v else None  # noqa: E731
+        runs.setdefault(run_key(file_meta(chunks), i, runs_by), RunRecord()).add(chunks)
+    s = _Scores()
+    for r, rd in enumerate(runs.values(), start=1):
+        s.add_run(r, rd)
+    ts = [t for rd in runs.values() for t in rd.t]
+    t0, t1 = (min(ts), max(ts)) if ts else (None, None)
+    allsq = np.concatenate(s.sq) if s.sq else np.empty(0)
+    first = next(iter(runs.values()))
+    sensors: dict[str, int] = defaultdict(int)
+    events: dict[str, int] = defaultdict(int)
+    counts: dict[str, int] = defaultdict(int)
+    for rd in runs.values():
+        for d, src in ((sensors, rd.sensors), (events, rd.events)):
+            for k, v in src.items():
+                d[k] += v
+        for k, (_, v) in rd.counts.items():
+            counts[k] += v
     return Summary(
         path=str(files[0]) if len(files) == 1 else f"{len(files)} files", size_bytes=size, complete=complete,
         dropped_bytes=dropped, t_first_ns=t0, t_last_ns=t1,
-        duration_s=0.0 if t0 is None or t1 is None else (t1 - t0) / 1e9, sensors=dict(sorted(rd.sensors.items())),
-        tracks=tracks, tentative_only=tentative,
-        position_rmse=float(np.sqrt(allsq.mean())) if allsq.size else None,
-        nis=verdict(*nis), nees=verdict(*nees), counts={k: v for k, (_, v) in sorted(rd.counts.items())},
-        events=dict(sorted(rd.events.items())), meta=rd.meta, files=[str(p) for p in files],
-        ospa_m=mean(rd.metrics.get("ospa")), gospa_m=mean(rd.metrics.get("gospa")),
+        duration_s=0.0 if t0 is None or t1 is None else (t1 - t0) / 1e9, sensors=dict(sorted(sensors.items())),
+        tracks=s.tracks, tentative_only=s.tentative, position_rmse=float(np.sqrt(allsq.mean())) if allsq.size else None,
+        nis=s.verdict("nis", len(runs)), nees=s.verdict("nees", len(runs)), counts=dict(sorted(counts.items())),
+        events=dict(sorted(events.items())), meta=first.meta, files=[str(p) for p in files],
+        ospa_m=float(np.mean(s.ospa)) if s.ospa else None, gospa_m=float(np.mean(s.gospa)) if s.gospa else None,
+        ospa_times=len(s.ospa), runs=len(runs), runs_by=runs_by, run_ids=list(runs),
     )
 
 
-def _tracks(est: dict[str, list], pos_idx: list[int]) -> tuple:
-    """Per confirmed track, from the latest revision of each estimate."""
-    latest: dict[tuple[int, int, str], int] = {}
-    for i, key in enumerate(zip(est["track"], est["t"], est["sensor"], strict=True)):
-        j = latest.get(key)
-        if j is None or est["revision"][i] >= est["revision"][j]:
-            latest[key] = i
-    rows = sorted((k[0], k[1], i) for k, i in latest.items() if est["status"][i] != "retracted")
-    by_track: dict[int, list[int]] = defaultdict(list)
-    for tid, _, i in rows:
-        by_track[tid].append(i)
-    tracks, all_sq = [], []
-    nis_v, nis_d, nees_v, nees_d = [], [], [], []
-    nis_s, nees_s = [], []  # per track, in time order: for the autocorrelation
-    tentative = 0
-    for tid in sorted(by_track, key=lambda x: est["label"][by_track[x][0]]):
-        idx = by_track[tid]
-        conf = [i for i in idx if est["status"][i] == "confirmed"]
-        if not conf:
-            tentative += 1
-            continue
+class _Scores:
+    """Per confirmed track of each run, from the latest revision of each estimate; NIS/NEES samples
+    with their run, time and track sequence; OSPA/GOSPA per scan time."""
+
+    def __init__(self) -> None:
+        self.tracks: list[TrackSummary] = []
+        self.sq: list[np.ndarray] = []
+        self.samples: dict[str, dict[str, list]] = {k: defaultdict(list) for k in ("nis", "nees")}
+        self.ospa: list[float] = []
+        self.gospa: list[float] = []
+        self.tentative = 0
+
+    def add_run(self, run: int, rd: RunRecord) -> None:
+        est = rd.est
+        pos_idx = [int(i) for i in rd.meta.get("position_indices", [])]  # type: ignore[union-attr]
+        by_track: dict[int, list[int]] = defaultdict(list)
+        rows = rd.latest()
+        for i in rows:
+            by_track[est["track"][i]].append(i)
+        for tid in sorted(by_track, key=lambda x: (est["label"][by_track[x][0]], x)):
+            conf = [i for i in by_track[tid] if est["status"][i] == "confirmed"]
+            if not conf:
+                self.tentative += 1
+                continue
+            self.tracks.append(self._track(run, tid, conf, est, pos_idx))
+        conf_rows = [i for i in rows if est["status"][i] == "confirmed"]
+        truth = rd.truth_points(pos_idx) if pos_idx else {}
+        if truth and conf_rows:
+            t = np.asarray([est["t"][i] for i in conf_rows], dtype=np.int64)
+            W = derive.world(np.asarray([est["x"][i] for i in conf_rows])[:, pos_idx])
+            scan = np.asarray(sorted(rd.scan_t | set(est["t"][i] for i in rows)), dtype=np.int64)
+            o, g = derive.set_distance_series(t, np.asarray([est["track"][i] for i in conf_rows]), W, truth, scan,
+                                              max_points=OSPA_MAX_POINTS)
+            self.ospa += o.tolist()
+            self.gospa += g.tolist()
+
+    def _track(self, run: int, tid: int, conf: list[int], est: dict[str, list], pos_idx: list[int]) -> TrackSummary:
         errs = [est["error"][i] for i in conf if est["nees_dof"][i]]  # scored against truth
         sq = np.sum(np.asarray(errs)[:, pos_idx] ** 2, axis=1) if errs and pos_idx else None
         if sq is not None:
-            all_sq.append(sq)
-        ni = [i for i in conf if est["nis_dof"][i]]
-        ne = [i for i in conf if est["nees_dof"][i]]
-        nis_v += [est["nis"][i] for i in ni]
-        nis_d += [est["nis_dof"][i] for i in ni]
-        nees_v += [est["nees"][i] for i in ne]
-        nees_d += [est["nees_dof"][i] for i in ne]
-        nis_s.append(np.array([est["nis"][i] for i in ni]))
-        nees_s.append(np.array([est["nees"][i] for i in ne]))
+            self.sq.append(sq)
+        means = {}
+        for name in ("nis", "nees"):
+            use = [i for i in conf if est[f"{name}_dof"][i]]
+            smp = self.samples[name]
+            smp["v"] += [est[name][i] for i in use]
+            smp["dof"] += [est[f"{name}_dof"][i] for i in use]
+            smp["t"] += [est["t"][i] for i in use]
+            smp["run"] += [run] * len(use)
+            smp["seqs"].append(np.array([est[name][i] for i in use], dtype=np.float64))
+            means[name] = float(np.mean(smp["seqs"][-1])) if use else None
         ts = [est["t"][i] for i in conf]
-        tracks.append(TrackSummary(
-            est["label"][conf[0]], min(ts), max(ts), len(conf), None if sq is None else float(np.sqrt(sq.mean())),
-            float(np.mean([est["nis"][i] for i in ni])) if ni else None,
-            float(np.mean([est["nees"][i] for i in ne])) if ne else None, int(tid)))
-    arr = lambda v: np.asarray(v, dtype=np.float64)  # noqa: E731
-    return tracks, all_sq, (arr(nis_v), arr(nis_d), nis_s), (arr(nees_v), arr(nees_d), nees_s), tentative
+        return TrackSummary(est["label"][conf[0]], min(ts), max(ts), len(conf),
+                            None if sq is None else float(np.sqrt(sq.mean())), means["nis"], means["nees"], int(tid),
+                            run)
+
+    def verdict(self, name: str, runs: int) -> Consistency:
+        smp = self.samples[name]
+        v, d = np.asarray(smp["v"], dtype=np.float64), np.asarray(smp["dof"], dtype=np.float64)
+        c = verdict(v, d, smp["seqs"], runs=runs)
+        if runs > 1:
+            c.per_time = per_time(np.asarray(smp["t"], dtype=np.int64), np.asarray(smp["run"]), v, d)
+        return c
 
 
-def _table(tracks: list[TrackSummary]) -> list[str]:
+def _table(tracks: list[TrackSummary], *, runs: bool) -> list[str]:
     head = ["track", "first [s]", "last [s]", "span [s]", "estimates", "RMSE [m]", "mean NIS", "mean NEES"]
     f = lambda v, p: "-" if v is None else f"{v:.{p}f}"  # noqa: E731
     rows = [[t.track_id, f(t.first_t_ns / 1e9, 3), f(t.last_t_ns / 1e9, 3), f((t.last_t_ns - t.first_t_ns) / 1e9, 2),
              str(t.estimates), f(t.position_rmse, 3), f(t.mean_nis, 2), f(t.mean_nees, 2)] for t in tracks]
+    if runs:
+        head, rows = ["run", *head], [[str(t.run), *r] for t, r in zip(tracks, rows, strict=True)]
     w = [max(len(r[i]) for r in [head, *rows]) for i in range(len(head))]
     return ["  " + "  ".join(x.rjust(n) for x, n in zip(r, w, strict=True)) for r in [head, *rows]]
+
+
+_RUNS_BY = {"id": "told apart by the run id each recording carries",
+            "files": "each file taken as one run (--runs files)", "one": "all files taken as one run (--runs one)"}
+
+
+def _consistency_lines(name: str, c: Consistency) -> list[str]:
+    if c.mean is None:
+        return [f"{name}: no data"]
+    lo, hi = c.interval  # type: ignore[misc]
+    out = [f"{name}: mean {c.mean:.3f} over {c.samples} samples, 95 % interval [{lo:.3f}, {hi:.3f}]: "
+           f"{c.describe()} ({c.assumes})"]
+    pt = c.per_time
+    if pt is not None and pt.times and pt.interval is not None:
+        out.append(f"  averaged over the {pt.runs} runs at each time held by all of them: {pt.inside} of {pt.times} "
+                   f"times inside their 95 % interval (chi2(n N) / N: [{pt.interval[0]:.3f}, {pt.interval[1]:.3f}] "
+                   f"at the first; 95 % expected, scattering more than a binomial's as the times are correlated)")
+    return out
 
 
 def format_summary(s: Summary) -> str:
@@ -293,26 +249,32 @@ def format_summary(s: Summary) -> str:
              + (f", {s.dropped_bytes} trailing bytes unreadable" if s.dropped_bytes else "")]
     if len(s.files) > 1:
         lines.append("files: " + ", ".join(Path(f).name for f in s.files))
+        no_id = s.runs_by == "id" and "" in s.run_ids
+        lines.append(f"runs: {s.runs} ({_RUNS_BY[s.runs_by]}"
+                     + ("; files without one, from before run ids, are taken as one run: --runs files if each is an "
+                        "independent run" if no_id else "")
+                     + ("; taken as independent runs of the same scenario" if s.runs > 1 else "") + ")")
     if s.t_first_ns is not None:
         lines.append(f"time span: {s.duration_s:.3f} s (t = {s.t_first_ns / 1e9:.3f} .. {s.t_last_ns / 1e9:.3f} s)")
     lines.append("sensors: " + (", ".join(f"{k} ({v} points)" for k, v in s.sensors.items()) or "none"))
     lines.append(f"tracks: {len(s.tracks)} confirmed, {s.tentative_only} never confirmed")
     if s.tracks:
-        lines.extend(_table(s.tracks))
+        lines.extend(_table(s.tracks, runs=s.runs > 1))
     if s.position_rmse is not None:
         lines.append(f"position RMSE against truth: {s.position_rmse:.4f} m")
     if s.ospa_m is not None:
-        lines.append(f"OSPA against truth: mean {s.ospa_m:.3f} m, GOSPA mean {s.gospa_m:.3f} m (order 2, cut-off 10 m, "
-                     "as logged: before later revisions)")
+        lines.append(f"OSPA against truth: mean {s.ospa_m:.3f} m, GOSPA mean {s.gospa_m:.3f} m (order 2, cut-off "
+                     f"{derive.OSPA_C_M:g} m; over {s.ospa_times} scan times with truth, from the latest revision of "
+                     "each confirmed estimate)")
     for name, c in (("NIS", s.nis), ("NEES", s.nees)):
-        if c.mean is None:
-            lines.append(f"{name}: no data")
-        else:
-            lo, hi = c.interval  # type: ignore[misc]
-            lines.append(f"{name}: mean {c.mean:.3f} over {c.samples} samples, 95 % interval [{lo:.3f}, {hi:.3f}]:"
-                         f" {c.verdict} ({c.assumes})")
+        lines.extend(_consistency_lines(name, c))
     if s.counts:
         lines.append("counts: " + ", ".join(f"{k}={v}" for k, v in s.counts.items()))
     if s.events:
-        lines.append("events: " + ", ".join(f"{k}={v}" for k, v in s.events.items()))
+        lines.append("events: " + ", ".join(f"{k}={v}" for k, v in s.events_net.items())
+                     + " (those that stood after the replays)")
+        withdrawn = sum(v for k, v in s.events.items() if k.startswith("withdrawn "))
+        if s.events.get("replay"):
+            lines.append(f"replays: {s.events['replay']}, which withdrew {withdrawn} events (these follow the arrival "
+                         "order; the figures above do not)")
     return os.linesep.join(lines)

@@ -9,6 +9,7 @@ with its footer); a killed service leaves the current file readable up to its la
 from __future__ import annotations
 
 import time
+import uuid
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
@@ -29,7 +30,8 @@ class RotatingSink:
         self.directory = Path(directory)
         self.prefix = prefix
         self._kw = dict(layout=layout, position_indices=position_indices, velocity_indices=velocity_indices,
-                        flush_interval_s=flush_interval_s, meta=meta, counts=counts)
+                        flush_interval_s=flush_interval_s, meta=meta, counts=counts,
+                        run_id=uuid.uuid4().hex)  # one run: every file of the set carries its id
         self.rotate_bytes = rotate_bytes
         self.rotate_s = rotate_s
         self._clock = clock

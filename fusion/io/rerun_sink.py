@@ -15,6 +15,7 @@ z = 0 plane; track labels are fusion.io.labels.short_id of the id):
                          x, std = sqrt(diag P), nis, nis_dof, nees, nees_dof, error, target (what
                          `fusion inspect` reads; NaN where a value does not apply)
   record/associations    every accepted measurement: sensor, seq, outcome, track label, gated labels, nis
+  record/truth           every true state logged: target, x (in the tracker's layout, float64)
   record/events          births, confirmations, coasting, deletions (with reason), withdrawals,
                          replays and refusals: kind, track, label, reason, retracted, detail
   events                 the same as human-readable lines (TextLog)
@@ -25,7 +26,8 @@ z = 0 plane; track labels are fusion.io.labels.short_id of the id):
                          ellipse (ellipsoid in 3-D), start and end markers
   tracks/<label>/...     a viewed track's time series (see fusion.io.blueprint.TRACK_VIEWS)
   metrics/{ospa,gospa}   set distances to truth (fusion.io.derive), counts/<name>: the tracker's counters
-  meta                   static JSON: layout, position/velocity indices, sensors
+  meta                   static JSON: layout, position/velocity indices, sensors, run_id (one per
+                         tracker run: the files of a rotated set share it; `fusion inspect` groups by it)
 Timelines: `t` (sensor time: a duration from the stream's start, or a timestamp for epoch times),
 `step` (tracker call counter), `arrival` (arrival time of the data that produced the row).
 """
@@ -34,6 +36,7 @@ from __future__ import annotations
 
 import json
 import time
+import uuid
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
@@ -63,6 +66,7 @@ class RerunSink:
         velocity_indices: tuple[int, ...], recording_id: str = "fusion", application_id: str = "fusion",
         flush_rows: int = 200_000, flush_interval_s: float = 0.5, view_interval_s: float = 5.0,
         meta: Mapping[str, Any] | None = None, counts: Callable[[], Mapping[str, int]] | None = None,
+        run_id: str | None = None,
     ) -> None:
         import rerun as rr
 
@@ -75,7 +79,7 @@ class RerunSink:
         self.ndim = len(position_indices)
         self._cols: dict[str, Column] = {}
         self._est: list[tuple[Estimate, int, int]] = []
-        self._truth_rows: list[tuple[int, int, Array]] = []
+        self._truth_rows: list[tuple[int, int, Array, str]] = []
         self._pending = 0
         self.rows_written = 0
         self._flush_rows = flush_rows
@@ -91,8 +95,10 @@ class RerunSink:
         self._styled: set[str] = set()
         self._layout_key: tuple = ()
         self._closed = False
+        self.run_id = run_id or uuid.uuid4().hex  # a new run unless continuing one (fusion.io.recording)
         info = {"layout": list(layout), "position_indices": list(position_indices),
-                "velocity_indices": list(velocity_indices), "labels": "fusion.io.labels.short_id", **(meta or {})}
+                "velocity_indices": list(velocity_indices), "labels": "fusion.io.labels.short_id", **(meta or {}),
+                "run_id": self.run_id}
         self.rec.log("meta", rr.TextDocument(json.dumps(info, sort_keys=True), media_type="text/plain"), static=True)
         # the names of an IMM's modes for their probability series (meta "modes"; else "mode j")
         self.mode_names: tuple[str, ...] = tuple(str(n) for n in (meta or {}).get("modes", ()))
@@ -132,7 +138,7 @@ class RerunSink:
         """A true state in the tracker's layout; kept to score estimates at the same t_ns (the
         world/truth rows are built at flush, in one block)."""
         s = self.rows.add_truth(target_id, t_ns, state)
-        self._truth_rows.append((t_ns, self._step, s))
+        self._truth_rows.append((t_ns, self._step, s, target_id))
         self._pending += 1
 
     def log_text(self, t_ns: int, text: str, level: str = "INFO") -> None:
@@ -212,7 +218,10 @@ class RerunSink:
         truth, self._truth_rows = self._truth_rows, []
         if truth:
             t_t = [r[0] for r in truth]
-            W = world(np.stack([r[2] for r in truth])[:, self.rows.pi])
+            S = np.stack([r[2] for r in truth])
+            self.col("record/truth", "record").extend(t_t, [r[1] for r in truth], t_t, blocks={"x": S},
+                                                      target=[r[3] for r in truth])  # float64: for inspect
+            W = world(S[:, self.rows.pi])
             self.col("world/truth", "points", rgba=colour("truth"), radius=-1.5).extend(
                 t_t, [r[1] for r in truth], t_t, p=list(W[:, None, :]))
         self.rows.derive(est, self)

@@ -46,10 +46,13 @@ def latest(results: list[StepResult]) -> dict[tuple[int, int, str], Estimate]:
     return out
 
 
-def record_scenario(name: str, path, *, duration_s: float | None = None, sink_factory=None):
+def record_scenario(name: str, path, *, duration_s: float | None = None, sink_factory=None, batch: int = 50,
+                    shuffle_seed: int | None = None):
     """The reference scenario `name` (configs/scenarios/<name>.toml) as the service runs it: its
     stream of samples (measurements and truth) through the Pipeline with a RerunSink writing
-    `path`. Returns the pipeline (its tracker and counts) after the sink is closed."""
+    `path`, `batch` samples per ingest; with `shuffle_seed`, the measurements of each block of 40
+    samples come in a seeded random order (more late arrivals; truth keeps its places). Returns the
+    pipeline (its tracker and counts) after the sink is closed."""
     import msgspec
 
     from fusion.io import wire
@@ -68,10 +71,41 @@ def record_scenario(name: str, path, *, duration_s: float | None = None, sink_fa
                      counts=lambda: pipe.counts().flat())  # type: ignore[union-attr]
     pipe = Pipeline(tracker, wire.Codec(sf.service.namespace), sink=sink)
     records = [(s.arrival_ns, s.key, s.payload) for s in samples]
+    if shuffle_seed is not None:
+        rng = np.random.default_rng(shuffle_seed)
+        meas = [i for i, r in enumerate(records) if "/truth/" not in r[1]]
+        order = list(range(len(records)))
+        for b in range(0, len(meas), 40):
+            block = meas[b:b + 40]
+            for i, j in zip(block, rng.permutation(block).tolist(), strict=True):
+                order[i] = j
+        records = [records[j] for j in order]
     try:
-        for i in range(0, len(records), 50):
-            pipe.ingest(records[i:i + 50])
+        for i in range(0, len(records), batch):
+            pipe.ingest(records[i:i + batch])
     finally:
         sink.close()
         pipe.warn.flush()  # its held-back warnings now, not in another test's flush_all
     return pipe
+
+
+def record_maneuver(path, *, seed: int = 3, batch: int = 1, sink=None) -> tuple[list[StepResult], dict]:
+    """maneuver_run(seed) through the tracker, `batch` detections per step, into a RerunSink at
+    `path` (or into `sink`, e.g. a RotatingSink), truth logged first. Returns (results, truth)."""
+    from fusion.io.rerun_sink import RerunSink
+
+    tr, dets, truth = maneuver_run(seed=seed)
+    out = sink if sink is not None else RerunSink(
+        path, layout=tr.layout, position_indices=tr.position_indices, velocity_indices=tr.velocity_indices,
+        counts=lambda: tr.counts.flat())
+    results = []
+    try:
+        for t, x in sorted(truth.items()):
+            out.log_truth("target", t, x)
+        for i in range(0, len(dets), batch):
+            r = tr.process(dets[i:i + batch])
+            results.append(r)
+            out.log_step(r)
+    finally:
+        out.close()
+    return results, truth
