@@ -217,8 +217,7 @@ class Service:
 
     def _step(self, batch: list[Record]) -> None:
         if self.stream is not None:
-            for rec in batch:
-                self.stream.write(*rec)
+            self.stream.write_many(batch)
         out = self.pipeline.ingest(batch)
         self._processed += len(batch)
         enc = wire.estimate_encoder(self.tracker.layout, self.tracker.model_name)
