@@ -30,17 +30,16 @@ def detection_of(msg: m.Measurement, arrival_ns: int | None = None) -> Detection
     """The tracker's view of a wire measurement: z and R in the sensor's measurement space (R None
     when the message carries no noise: the tracker then takes the sensor's configured one).
     R = diag(std^2) for per-axis standard deviations, shared read-only between the messages that
-    carry the same ones (diagonal_R)."""
+    carry the same ones (diagonal_R). The two common shapes (a 2-D radar return, a position with
+    per-axis std) are built without the general path's lists."""
     d = msg.data
     R: np.ndarray | None = None
-    if isinstance(d, m.Cartesian):
-        z = np.array(d.pos_m, dtype=np.float64)
-        if d.std_m is not None:
-            R = diagonal_R(tuple(d.std_m))
-        elif d.cov_m2 is not None:
-            k = z.shape[0]
-            R = np.array(d.cov_m2, dtype=np.float64).reshape(k, k)
-    else:
+    if type(d) is m.Radar:
+        if d.elevation_rad is None and d.range_rate_mps is None:
+            z = np.array((d.range_m, d.bearing_rad), dtype=np.float64)
+            if d.range_std_m is not None:
+                R = diagonal_R((d.range_std_m, d.bearing_std_rad))  # type: ignore[arg-type]
+            return Detection(msg.sensor_id, msg.t_ns, msg.seq, z, R, arrival_ns, msg.epoch, True)
         vals = [d.range_m, d.bearing_rad]
         std = [d.range_std_m, d.bearing_std_rad]
         if d.elevation_rad is not None:
@@ -52,7 +51,14 @@ def detection_of(msg: m.Measurement, arrival_ns: int | None = None) -> Detection
         z = np.array(vals, dtype=np.float64)
         if d.has_noise:
             R = diagonal_R(tuple(std))  # type: ignore[arg-type]
-    return Detection(msg.sensor_id, msg.t_ns, msg.seq, z, R, arrival_ns, msg.epoch, not isinstance(d, m.Cartesian))
+        return Detection(msg.sensor_id, msg.t_ns, msg.seq, z, R, arrival_ns, msg.epoch, True)
+    z = np.array(d.pos_m, dtype=np.float64)
+    if d.std_m is not None:
+        R = diagonal_R(tuple(d.std_m))
+    elif d.cov_m2 is not None:
+        k = z.shape[0]
+        R = np.array(d.cov_m2, dtype=np.float64).reshape(k, k)
+    return Detection(msg.sensor_id, msg.t_ns, msg.seq, z, R, arrival_ns, msg.epoch, False)
 
 
 _DIAGONALS: dict[tuple[float, ...], np.ndarray] = {}
