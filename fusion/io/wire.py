@@ -175,3 +175,20 @@ def encode_status(status: dict[str, Any]) -> bytes:
 
 def encode_snapshot(estimates: list[m.Estimate]) -> bytes:
     return m.encode(m.Snapshot(estimates=estimates))
+
+
+_SNAPSHOT_HEAD = m.encode(m.Snapshot(estimates=[]))[:-1]  # the map up to the estimates' array header
+
+
+def snapshot_of_encoded(estimates: list[bytes]) -> bytes:
+    """encode_snapshot's bytes from estimates already encoded (m.encode of each m.Estimate):
+    the Snapshot map with the msgpack array header of len(estimates) (fixarray below 16,
+    array16 below 2^16, else array32) and the estimates' bytes joined, with no re-encoding."""
+    n = len(estimates)
+    if n < 16:
+        head = bytes((0x90 | n,))
+    elif n < 1 << 16:
+        head = b"\xdc" + n.to_bytes(2, "big")
+    else:
+        head = b"\xdd" + n.to_bytes(4, "big")
+    return b"".join([_SNAPSHOT_HEAD, head, *estimates])

@@ -247,3 +247,16 @@ def test_every_cartesian_shape_is_judged_by_the_rule(d: int, noise: str) -> None
     else:
         with pytest.raises(m.InvalidMessageError):
             m.decode_measurement(raw)
+
+
+@pytest.mark.parametrize("n", [0, 1, 15, 16, 17, 65535, 65536], ids=lambda n: f"n{n}")
+def test_a_snapshot_of_encoded_estimates_is_the_snapshot_encoded(n: int) -> None:
+    """The service joins the bytes it published into the snapshot answer: the same bytes as
+    encoding the Snapshot, across the msgpack array header's three sizes."""
+    from fusion.io import wire
+
+    ests = [m.Estimate(track_id=i, t_ns=i, sensor_id="r1", seq=i, state=[float(i)], cov=[1.0], layout=["x"],
+                       model="cv", status="confirmed", revision=0) for i in range(n)]
+    got = wire.snapshot_of_encoded([m.encode(e) for e in ests])
+    assert got == wire.encode_snapshot(ests)
+    assert m.decode_snapshot(got).estimates == ests
