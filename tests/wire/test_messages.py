@@ -260,3 +260,26 @@ def test_a_snapshot_of_encoded_estimates_is_the_snapshot_encoded(n: int) -> None
     got = wire.snapshot_of_encoded([m.encode(e) for e in ests])
     assert got == wire.encode_snapshot(ests)
     assert m.decode_snapshot(got).estimates == ests
+
+
+@pytest.mark.parametrize("case", ["imm", "cv-no-nis", "retracted-empty", "negative-seq"], ids=str)
+def test_the_estimate_encoder_writes_the_estimate_message(case: str) -> None:
+    """The service's encoder (positional, fusion.io.wire) and the schema's Estimate give the
+    same bytes, optional fields left off the same way."""
+    import numpy as np
+
+    from fusion.io import wire
+    from fusion.tracking.results import Estimate
+
+    layout = ("x", "vx", "y", "vy")
+    x, P = np.arange(4.0), np.arange(16.0).reshape(4, 4)
+    e = {
+        "imm": Estimate(7, 10**18, "radar1", 3, x, P, "confirmed", 2, 1.25, None, None, np.array([0.25, 0.75])),
+        "cv-no-nis": Estimate(7, -5, "cam1", 0, x, P, "tentative", 0, None, None, None),
+        "retracted-empty": Estimate(2**62, 5, "cam1", 9, np.zeros(0), np.zeros((0, 0)), "retracted", 4, None, None,
+                                    None),
+        "negative-seq": Estimate(1, 5, "cam1", -1, x, P, "predicted", 0, None, None, None),
+    }[case]
+    want = m.encode(wire.estimate_message(e, layout=layout, model="imm_cv"))
+    assert wire.estimate_encoder(layout, "imm_cv")(e) == want
+    assert m.decode_estimate(want).layout == (list(layout) if e.x.size else [])
