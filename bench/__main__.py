@@ -1,4 +1,4 @@
-"""`python -m bench [--quick] [--only e2e,core,tracker,gospa,recording]`: every benchmark, one command.
+"""`python -m bench [--quick] [--only e2e,core,tracker,gospa,recording,intake]`: every benchmark, one command.
 `--only soak` (never in the default run): the service's memory over `--soak-s` seconds.
 
 Each benchmark measures its baselines in the same run, interleaved, and prints ratios. The
@@ -41,8 +41,8 @@ def machine() -> dict[str, str]:
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python -m bench")
     p.add_argument("--quick", action="store_true", help="fewer repeats and sizes (~1 minute)")
-    p.add_argument("--only", default="e2e,core,tracker,gospa,recording",
-                   help="comma-separated: e2e, core, tracker, gospa, recording; soak (not in the default)")
+    p.add_argument("--only", default="e2e,core,tracker,gospa,recording,intake",
+                   help="comma-separated: e2e, core, tracker, gospa, recording, intake; soak (not in the default)")
     p.add_argument("--soak-s", type=float, default=600.0, help="duration of the soak (default 600 s)")
     p.add_argument("--json", type=Path, help="also write the figures to this file")
     args = p.parse_args(argv)
@@ -80,6 +80,10 @@ def main(argv: list[str] | None = None) -> int:
             from bench import recording_cost
 
             results["recording"] = recording_cost.run(quick=args.quick)
+        elif name == "intake":
+            from bench import intake_path
+
+            results["intake"] = intake_path.run(quick=args.quick)
         else:
             print(f"unknown benchmark {name!r}", file=sys.stderr)
             return 2

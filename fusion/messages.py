@@ -75,6 +75,9 @@ class Cartesian(Base, tag="cartesian", kw_only=True):
 
     def __post_init__(self) -> None:
         d = len(self.pos_m)
+        std = self.std_m
+        if 0 < d < 4 and self.cov_m2 is None and (std is None or len(std) == d):
+            return  # the common cases, checked as below in fewer steps (decode's hot path)
         if d not in (1, 2, 3):
             raise ValueError(f"pos_m must have 1, 2 or 3 components, got {d}")
         if self.std_m is not None and self.cov_m2 is not None:
@@ -100,6 +103,12 @@ class Radar(Base, tag="radar", kw_only=True):
     range_rate_std_mps: Positive | None = None
 
     def __post_init__(self) -> None:
+        if self.range_std_m is None:
+            if self.bearing_std_rad is None and self.elevation_std_rad is None and self.range_rate_std_mps is None:
+                return  # no noise at all: valid (decode's hot path; the general rule below)
+        elif (self.bearing_std_rad is not None and (self.elevation_std_rad is None) == (self.elevation_rad is None)
+              and (self.range_rate_std_mps is None) == (self.range_rate_mps is None)):
+            return  # a standard deviation for exactly the values present: valid
         values = [True, True, self.elevation_rad is not None, self.range_rate_mps is not None]
         stds = [self.range_std_m, self.bearing_std_rad, self.elevation_std_rad, self.range_rate_std_mps]
         if any(s is not None and not v for s, v in zip(stds, values, strict=True)):

@@ -90,6 +90,7 @@ class Pipeline:
         self._received = 0
         self._truth = 0
         self._refused: dict[Reason, int] = {}  # at the edge, before the tracker
+        self._routes: dict[str, tuple[str, str]] = {}  # key expression -> (kind, key id)
 
     def counts(self) -> Counts:
         """The tracker's counts with the edge's folded in (see the module docstring)."""
@@ -105,30 +106,40 @@ class Pipeline:
         if self.sink is not None:
             self.sink.log_text(t_ns, f"refused sample on {key}: {reason.value}: {detail}", "WARN")
 
+    def _route(self, key: str) -> tuple[str, str]:
+        """(kind, key id) of a key expression, remembered (a few keys carry every sample)."""
+        r = self._routes.get(key)
+        if r is None:
+            if len(self._routes) >= 4096:
+                self._routes.clear()
+            r = self._routes[key] = (self.codec.kind(key), self.codec.key_id(key))
+        return r
+
     def _decode(self, arrival_ns: int, key: str, payload: bytes) -> Detection | ControlInput | None:
         """One sample: a Detection or ControlInput for the tracker, or None (truth recorded, or
         refused and counted)."""
-        kind = self.codec.kind(key)
+        kind, key_id = self._route(key)
         try:
-            if kind == "truth":
+            if kind == "meas":
+                d = self.codec.detection(payload, arrival_ns)
+            elif kind == "truth":
                 tr = self.codec.truth(payload, self.tracker.layout)
-                if tr is not None and tr[0] != self.codec.key_id(key):
+                if tr is not None and tr[0] != key_id:
                     self._refuse(Reason.KEY_MISMATCH, key, f"truth of {tr[0]!r} on another target's key")
                     return None
                 self._truth += 1
                 if tr is not None and self.sink is not None:
                     self.sink.log_truth(*tr)
                 return None
-            if kind == "input":
+            elif kind == "input":
                 c = self.codec.control(payload, arrival_ns)
-                if c.source_id != self.codec.key_id(key):
+                if c.source_id != key_id:
                     self._refuse(Reason.KEY_MISMATCH, key, f"an input of {c.source_id!r} on another source's key")
                     return None
                 return c
-            if kind != "meas":
+            else:
                 self._refuse(Reason.INVALID, key, "not a measurement, input or truth key")
                 return None
-            d = self.codec.detection(payload, arrival_ns)
         except MalformedMessageError as e:
             self._refuse(Reason.MALFORMED, key, str(e))
             return None
@@ -142,29 +153,28 @@ class Pipeline:
             log.exception("unexpected error decoding a sample on %s", key)
             self._refuse(Reason.MALFORMED, key, f"{type(e).__name__}: {e}")
             return None
-        if d.sensor_id != self.codec.key_id(key):
-            self._refuse(Reason.KEY_MISMATCH, key, f"a measurement of sensor {d.sensor_id!r} on another sensor's key",
-                         d.t_ns)
+        sensor, t_ns = d.sensor_id, d.t_ns
+        if sensor != key_id:
+            self._refuse(Reason.KEY_MISMATCH, key, f"a measurement of sensor {sensor!r} on another sensor's key", t_ns)
             return None
-        if self.max_future_wall_ns is not None and d.t_ns > arrival_ns + self.max_future_wall_ns:
-            self._refuse(Reason.FUTURE, key, f"sensor time {(d.t_ns - arrival_ns) / 1e9:.1f} s ahead of arrival",
-                         d.t_ns)
+        if self.max_future_wall_ns is not None and t_ns > arrival_ns + self.max_future_wall_ns:
+            self._refuse(Reason.FUTURE, key, f"sensor time {(t_ns - arrival_ns) / 1e9:.1f} s ahead of arrival", t_ns)
             return None
-        if d.sensor_id in self.tracker.sensors:
-            self.latency.add(d.sensor_id, arrival_ns - d.t_ns)
-            self.gaps.add(d.sensor_id, d.epoch, d.seq)
+        if sensor in self.tracker.sensors:
+            self.latency.add(sensor, arrival_ns - t_ns)
+            self.gaps.add(sensor, d.epoch, d.seq)
         return d
 
     def ingest(self, records: Sequence[Record]) -> Output:
         """Process samples in arrival order; return the tracker's result and what to publish."""
         dets: list[Detection | ControlInput] = []
-        last_arrival = None
+        decode = self._decode
         for arrival_ns, key, payload in records:
             self._received += 1
-            last_arrival = arrival_ns
-            d = self._decode(arrival_ns, key, payload)
+            d = decode(arrival_ns, key, payload)
             if d is not None:
                 dets.append(d)
+        last_arrival = records[-1][0] if records else None
         result = self.tracker.process(dets)
         for r in result.refused:
             self.warn.warn(r.reason.value, "refused %s#%d at t=%.3f s: %s: %s",

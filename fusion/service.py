@@ -30,6 +30,8 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from fusion import messages as m
 from fusion.config import ServiceConfig, mode_names
 from fusion.fixed_lag import FixedLagSmoother, smoothed_key
@@ -47,6 +49,7 @@ from fusion.prediction import Cadence, encode_predicted, predicted_key, snapshot
 from fusion.tracking.detection import Reason
 from fusion.tracking.results import Counts, Estimate
 from fusion.tracking.tracker import Tracker
+from fusion.tracking.trackset import Status
 
 log = logging.getLogger("fusion.service")
 
@@ -94,6 +97,7 @@ class Service:
         self._status_payload = b""
         self._snapshot_payload = b""
         self._status_at = 0.0
+        self._encoded: dict[Any, tuple[Estimate, bytes]] = {}  # estimate key -> (published estimate, its bytes)
         self.published = 0
         self.events_published = 0
         self.predicted_published = 0  # periodic predicted snapshots
@@ -217,14 +221,16 @@ class Service:
 
     def _step(self, batch: list[Record]) -> None:
         if self.stream is not None:
-            for rec in batch:
-                self.stream.write(*rec)
+            self.stream.write_many(batch)
         out = self.pipeline.ingest(batch)
         self._processed += len(batch)
         enc = wire.estimate_encoder(self.tracker.layout, self.tracker.model_name)
         BLOCK = self._zenoh.CongestionControl.BLOCK
+        encoded = self._encoded
         for e in out.to_publish:
-            self.session.put(wire.track_key(self.ns, e.track_id), enc(e), congestion_control=BLOCK)
+            payload = enc(e)
+            self.session.put(wire.track_key(self.ns, e.track_id), payload, congestion_control=BLOCK)
+            encoded[e.key] = (e, payload)  # the snapshot reuses the bytes (_refresh_status)
             self.published += 1
             if self.on_publish is not None:
                 self.on_publish(e)
@@ -338,9 +344,8 @@ class Service:
         refused = dict(sorted(refused.items()))
         arrived = self._q.offered
         queued = arrived - sum(intake.values()) - self._processed
-        by_status: dict[str, int] = {}
-        for t in self.tracker.tracks:
-            by_status[t.status.label] = by_status.get(t.status.label, 0) + 1
+        counts = np.bincount(self.tracker.track_set.status, minlength=len(Status)).tolist()  # not a Track per row
+        by_status = {s.label: counts[s] for s in Status if counts[s]}
         return {
             "uptime_s": (time.time_ns() - self._started_ns) / 1e9,
             "counts": {
@@ -421,6 +426,15 @@ class Service:
             return
         self._status_at = now
         self._status_payload = wire.encode_status(self.status_dict())
-        layout, model = self.tracker.layout, self.tracker.model_name
-        self._snapshot_payload = wire.encode_snapshot(
-            [wire.estimate_message(e, layout=layout, model=model) for e in self.pipeline.snapshot()])
+        enc = wire.estimate_encoder(self.tracker.layout, self.tracker.model_name)
+        was, now_encoded = self._encoded, {}
+        parts = []
+        for e in self.pipeline.snapshot():  # published estimates: their bytes were kept when published
+            k = e.key
+            c = was.get(k)
+            if c is None or c[0] is not e:
+                c = (e, enc(e))
+            now_encoded[k] = c
+            parts.append(c[1])
+        self._encoded = now_encoded  # only the snapshot's: bounded by the live tracks
+        self._snapshot_payload = wire.snapshot_of_encoded(parts)

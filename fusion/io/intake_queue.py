@@ -10,9 +10,12 @@ Every sample, whatever its key, goes through `offer(arrival_ns, key, size, paylo
      "overload"; otherwise the biggest source's oldest samples are dropped ("overload", counted
      against it) until the new one fits. A flood from one source therefore costs that source
      alone: the others keep their place in the queue.
-`drain(limit)` takes samples round-robin across sources (one from each in turn, sources in
-sorted order), then returns them sorted by arrival time, so that the tracker still sees arrival
-order within a batch while no source can take a whole batch while another waits.
+`drain(limit)` hands out the `limit` oldest samples across all sources, in the order they were
+queued (a merge of the per-source queues by offer number), so that a batch never brings a
+sample ahead of an older one of another source left for the next batch: under a backlog,
+taking sources in turn handed one sensor's newer scans out before the other's older ones, and
+every next batch was late data and a replay. Fairness is enforced at offer time (the flood
+pays, step 3), so no source can hold more than its share of the queue, and so of a batch.
 
 Sources (the fairness classes) are bounded in number: a measurement or input key whose id is a
 configured source is its own class ("meas/cam1"); every truth key shares "truth"; every other
@@ -77,9 +80,9 @@ class IntakeQueue:
         self._known = frozenset(known)
         self._clock = clock
         self._lock = threading.Lock()
-        self._queues: dict[str, deque[tuple[Record, int]]] = {}
+        self._queues: dict[str, deque[tuple[int, Record, int]]] = {}  # (offer number, record, cost)
         self._order: list[str] = []  # sorted class names with a queue
-        self._next = 0  # round-robin position in _order
+        self._seq = 0  # offer number of the next queued sample
         self._len = 0
         self._bytes = 0
         self._bucket: dict[str, tuple[float, float]] = {}  # class -> (tokens, time of last refill)
@@ -141,7 +144,7 @@ class IntakeQueue:
                 if victim is None or victim == cls or len(self._queues[victim]) <= len(self._queues.get(cls, ())):
                     self._refuse(cls, OVERLOAD)
                     return OVERLOAD
-                _, vcost = self._queues[victim].popleft()
+                _, _, vcost = self._queues[victim].popleft()
                 self._len -= 1
                 self._bytes -= vcost
                 self._refuse(victim, OVERLOAD)
@@ -149,7 +152,8 @@ class IntakeQueue:
             if q is None:
                 q = self._queues[cls] = deque()
                 self._order = sorted(self._queues)
-            q.append(((arrival_ns, key, payload()), cost))
+            q.append((self._seq, (arrival_ns, key, payload()), cost))
+            self._seq += 1
             self._len += 1
             self._bytes += cost
             self.max_depth = max(self.max_depth, self._len)
@@ -165,23 +169,26 @@ class IntakeQueue:
         return best
 
     def drain(self, limit: int) -> list[Record]:
-        """Up to `limit` samples, round-robin across sources, returned in arrival order."""
+        """The `limit` oldest samples across sources (by offer number), in arrival order.
+
+        A merge of the per-source queues: the source whose head is oldest hands out its run of
+        samples older than every other source's head, in one slice."""
         out: list[Record] = []
         with self._lock:
-            order = self._order
-            k = len(order)
-            idle = 0
-            while len(out) < limit and self._len and idle < k:
-                q = self._queues[order[self._next % k]]
-                self._next = (self._next + 1) % k
+            queues = [q for q in self._queues.values() if q]
+            while len(out) < limit and queues:
+                if len(queues) == 1:
+                    q, bound = queues[0], None
+                else:
+                    queues.sort(key=lambda q: q[0][0])
+                    q, bound = queues[0], queues[1][0][0]
+                while q and len(out) < limit and (bound is None or q[0][0] < bound):
+                    _, rec, cost = q.popleft()
+                    out.append(rec)
+                    self._len -= 1
+                    self._bytes -= cost
                 if not q:
-                    idle += 1
-                    continue
-                idle = 0
-                rec, cost = q.popleft()
-                out.append(rec)
-                self._len -= 1
-                self._bytes -= cost
+                    queues.pop(0)
             self.handed_out += len(out)
         out.sort(key=lambda r: r[0])
         return out

@@ -19,10 +19,10 @@ from __future__ import annotations
 
 import contextlib
 import logging
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
-from fusion.io.streamfile import StreamWriter
+from fusion.io.streamfile import Record, StreamWriter
 
 log = logging.getLogger("fusion.recording")
 STREAM_SUFFIX = ".fstream"
@@ -81,23 +81,36 @@ class RotatingStream:
         self._open()
 
     def write(self, arrival_ns: int, key: str, payload: bytes) -> None:
+        self.write_many([(arrival_ns, key, payload)])
+
+    def write_many(self, records: Sequence[Record]) -> None:
+        """Append a batch of records, one write per file it goes to: a part holds records up
+        to the first that takes it to rotate_bytes (counted as payload + key + 16 per record),
+        the rest go on in the next part. Records that cannot be written are counted in `lost`."""
         if self._follow is not None and (now := self._follow()) != self._followed:
             self._followed, self._base, self._part = now, now.with_suffix(STREAM_SUFFIX), 0
             self._rotate()
-        elif self._w is not None and self._bytes >= self.rotate_bytes:
-            self._part += 1
-            self._rotate()
-        if self._w is None:
-            self.lost += 1
-            return
-        try:
-            self._w.write(arrival_ns, key, payload)
-        except OSError as e:
-            self._fail(self.path, e)
-            self.lost += 1
-            return
-        self._bytes += len(payload) + len(key) + 16
-        self.frames += 1
+        i, n = 0, len(records)
+        while i < n:
+            if self._w is not None and self._bytes >= self.rotate_bytes:
+                self._part += 1
+                self._rotate()
+            if self._w is None:
+                self.lost += n - i
+                return
+            j, size = i, self._bytes
+            while j < n and size < self.rotate_bytes:
+                size += len(records[j][2]) + len(records[j][1]) + 16
+                j += 1
+            try:
+                self._w.write_many(records[i:j])
+            except OSError as e:
+                self._fail(self.path, e)
+                self.lost += n - i
+                return
+            self._bytes = size
+            self.frames += j - i
+            i = j
 
     def close(self) -> None:
         if self._w is not None:

@@ -3,8 +3,9 @@
 Format (little-endian):
     header   b"FUSIONST" | u16 format version (1) | u32 n | n bytes of JSON metadata
     frame*   u32 n | u32 crc32(body) | body: msgpack [arrival_ns: int, key: str, payload: bytes]
-Frames are appended with one unbuffered write each, so a crash costs at most the frame being
-written; the reader detects a cut or corrupt last frame, skips it, and reports it (one line
+Frames are appended unbuffered, one write per batch of records (`write_many`, the service's
+per-batch call) or per record (`write`), so a crash costs at most the frames of the write under
+way; the reader detects a cut or corrupt last frame, skips it, and reports it (one line
 through logging, "fusion.stream", and `StreamReader.truncated`). A corrupt header raises StreamFormatError.
 
 `read_records(path)` also accepts `.jsonl`: one JSON message per line (fusion.messages, as
@@ -18,7 +19,7 @@ import logging
 import struct
 import time
 import zlib
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -38,6 +39,12 @@ Record = tuple[int, str, bytes]
 log = logging.getLogger("fusion.stream")
 
 
+def frame(arrival_ns: int, key: str, payload: bytes) -> bytes:
+    """One frame: u32 len(body) | u32 crc32(body) | body (msgpack [arrival_ns, key, payload])."""
+    body = _enc.encode((int(arrival_ns), key, bytes(payload)))
+    return _FRAME.pack(len(body), zlib.crc32(body)) + body
+
+
 class StreamFormatError(InputError):
     """Not a fusion stream file, or an unsupported version."""
 
@@ -55,9 +62,15 @@ class StreamWriter:
         self.frames = 0
 
     def write(self, arrival_ns: int, key: str, payload: bytes) -> None:
-        body = _enc.encode((int(arrival_ns), key, bytes(payload)))
-        self._f.write(_FRAME.pack(len(body), zlib.crc32(body)) + body)
+        self._f.write(frame(arrival_ns, key, payload))
         self.frames += 1
+
+    def write_many(self, records: Sequence[Record]) -> int:
+        """Append records with one write; the bytes written."""
+        blob = b"".join([frame(a, k, p) for a, k, p in records])
+        self._f.write(blob)
+        self.frames += len(records)
+        return len(blob)
 
     def close(self) -> None:
         if not self._f.closed:

@@ -7,6 +7,7 @@ from collections.abc import Callable
 from dataclasses import asdict
 from typing import Any
 
+import msgspec
 import numpy as np
 
 from fusion import messages as m
@@ -30,17 +31,16 @@ def detection_of(msg: m.Measurement, arrival_ns: int | None = None) -> Detection
     """The tracker's view of a wire measurement: z and R in the sensor's measurement space (R None
     when the message carries no noise: the tracker then takes the sensor's configured one).
     R = diag(std^2) for per-axis standard deviations, shared read-only between the messages that
-    carry the same ones (diagonal_R)."""
+    carry the same ones (diagonal_R). The two common shapes (a 2-D radar return, a position with
+    per-axis std) are built without the general path's lists."""
     d = msg.data
     R: np.ndarray | None = None
-    if isinstance(d, m.Cartesian):
-        z = np.array(d.pos_m, dtype=np.float64)
-        if d.std_m is not None:
-            R = diagonal_R(tuple(d.std_m))
-        elif d.cov_m2 is not None:
-            k = z.shape[0]
-            R = np.array(d.cov_m2, dtype=np.float64).reshape(k, k)
-    else:
+    if type(d) is m.Radar:
+        if d.elevation_rad is None and d.range_rate_mps is None:
+            z = np.array((d.range_m, d.bearing_rad), dtype=np.float64)
+            if d.range_std_m is not None:
+                R = diagonal_R((d.range_std_m, d.bearing_std_rad))  # type: ignore[arg-type]
+            return Detection(msg.sensor_id, msg.t_ns, msg.seq, z, R, arrival_ns, msg.epoch, True)
         vals = [d.range_m, d.bearing_rad]
         std = [d.range_std_m, d.bearing_std_rad]
         if d.elevation_rad is not None:
@@ -52,7 +52,14 @@ def detection_of(msg: m.Measurement, arrival_ns: int | None = None) -> Detection
         z = np.array(vals, dtype=np.float64)
         if d.has_noise:
             R = diagonal_R(tuple(std))  # type: ignore[arg-type]
-    return Detection(msg.sensor_id, msg.t_ns, msg.seq, z, R, arrival_ns, msg.epoch, not isinstance(d, m.Cartesian))
+        return Detection(msg.sensor_id, msg.t_ns, msg.seq, z, R, arrival_ns, msg.epoch, True)
+    z = np.array(d.pos_m, dtype=np.float64)
+    if d.std_m is not None:
+        R = diagonal_R(tuple(d.std_m))
+    elif d.cov_m2 is not None:
+        k = z.shape[0]
+        R = np.array(d.cov_m2, dtype=np.float64).reshape(k, k)
+    return Detection(msg.sensor_id, msg.t_ns, msg.seq, z, R, arrival_ns, msg.epoch, False)
 
 
 _DIAGONALS: dict[tuple[float, ...], np.ndarray] = {}
@@ -144,11 +151,37 @@ def event_message(ev: TrackEvent) -> m.Event:
                    reason=None if ev.reason is None else ev.reason.value, withdrawn=ev.retracted)
 
 
+def _positional(cls: type[msgspec.Struct]) -> type[msgspec.Struct]:
+    """A struct that encodes exactly as `cls` (same tag, fields in the same order, the same
+    defaults omitted) but is built from positional arguments, 0.4 us cheaper per message than
+    keywords: for encoding only. A field with a default factory (`v`) is a required one here,
+    so it is always given, as the factory's value always is on the wire."""
+    spec: list[Any] = []
+    for f in msgspec.structs.fields(cls):
+        if f.default is msgspec.NODEFAULT:  # required, or a factory
+            spec.append((f.name, Any))
+        else:
+            spec.append((f.name, Any, f.default))
+    cfg = cls.__struct_config__
+    return msgspec.defstruct(f"{cls.__name__}Out", spec, tag=cfg.tag, tag_field=cfg.tag_field, frozen=True,
+                             omit_defaults=cfg.omit_defaults)
+
+
+_EstimateOut = _positional(m.Estimate)
+
+
 def estimate_encoder(layout: tuple[str, ...], model: str) -> Callable[[Estimate], bytes]:
+    """e -> m.encode(estimate_message(e, layout=layout, model=model)), the same bytes, built
+    positionally (_EstimateOut) with the tolist of each array once."""
     names = list(layout)
+    encode, out, v = m.encode, _EstimateOut, m.SCHEMA_VERSION
 
     def enc(e: Estimate) -> bytes:
-        return m.encode(_estimate(e, names, model))
+        mu = e.mode_probabilities
+        x = e.x
+        return encode(out(v, e.track_id, e.t_ns, e.sensor_id, e.seq if e.seq > 0 else 0, x.tolist(),  # type: ignore[arg-type]
+                          e.P.ravel().tolist(), names if x.size else [], model, e.status, e.revision, e.nis,
+                          None if mu is None else mu.tolist()))
 
     return enc
 
@@ -169,3 +202,20 @@ def encode_status(status: dict[str, Any]) -> bytes:
 
 def encode_snapshot(estimates: list[m.Estimate]) -> bytes:
     return m.encode(m.Snapshot(estimates=estimates))
+
+
+_SNAPSHOT_HEAD = m.encode(m.Snapshot(estimates=[]))[:-1]  # the map up to the estimates' array header
+
+
+def snapshot_of_encoded(estimates: list[bytes]) -> bytes:
+    """encode_snapshot's bytes from estimates already encoded (m.encode of each m.Estimate):
+    the Snapshot map with the msgpack array header of len(estimates) (fixarray below 16,
+    array16 below 2^16, else array32) and the estimates' bytes joined, with no re-encoding."""
+    n = len(estimates)
+    if n < 16:
+        head = bytes((0x90 | n,))
+    elif n < 1 << 16:
+        head = b"\xdc" + n.to_bytes(2, "big")
+    else:
+        head = b"\xdd" + n.to_bytes(4, "big")
+    return b"".join([_SNAPSHOT_HEAD, head, *estimates])

@@ -56,13 +56,16 @@ class SourceClock:
         self._settle()
 
     def observe(self, t_ns: int, arrival_ns: int | None) -> None:
-        a = arrival_ns or 0
-        if len(self._window) == self._window.maxlen:
-            del self._sorted[bisect.bisect_left(self._sorted, self._window[0])]
-        self._window.append(t_ns - a)
-        bisect.insort(self._sorted, t_ns - a)
+        o = t_ns - (arrival_ns or 0)
+        window, srt = self._window, self._sorted
+        if len(window) == window.maxlen:
+            del srt[bisect.bisect_left(srt, window[0])]
+        window.append(o)
+        bisect.insort(srt, o)
         self.last_arrival_ns = arrival_ns
-        self._settle()
+        k = len(srt)  # _settle, inline: once per admitted measurement
+        self.settled = k >= self._rank
+        self.offset = srt[max(k - self._rank, 0)]
 
     def _settle(self) -> None:
         k = len(self._sorted)

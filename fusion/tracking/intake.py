@@ -51,7 +51,9 @@ class Intake:
         self.horizon_ns: int | None = None  # data before it is committed: too late
         self.committed: ScanKey | None = None  # newest scan the history dropped
         self._seen: set[Identity] = set()
-        self._valid_R: dict[tuple[str, int], np.ndarray] = {}  # (sensor, m): the last read-only R found valid
+        # (sensor, m): the last read-only R found valid, with its diagonal
+        self._valid_R: dict[tuple[str, int], tuple[np.ndarray, list[float]]] = {}
+        self._kinds = {s: (sm, sm.is_radar) for s, sm in sensors.items()}  # looked up per detection
 
     def admit(self, d: Detection) -> tuple[Detection | None, Refusal | None]:
         """The detection to track (its R filled in from the sensor's default when absent), or
@@ -132,62 +134,72 @@ class Intake:
     def validate(self, d: Detection) -> tuple[Detection, Refusal | None]:
         """The detection as the tracker takes it (R filled in), or why it is refused. An R
         already found valid for this sensor (the same read-only array: fusion.io.wire shares
-        one per distinct std) is not checked again."""
-        sm = self.sensors.get(d.sensor_id)
-        if sm is None:
-            return d, _no(d, Reason.UNKNOWN_SENSOR, f"sensor {d.sensor_id!r} is not configured")
-        if not isinstance(d.t_ns, int) or not isinstance(d.seq, int) or d.seq < 0:
+        one per distinct std) is not checked again: its diagonal is remembered with it."""
+        sid = d.sensor_id
+        info = self._kinds.get(sid)
+        if info is None:
+            return d, _no(d, Reason.UNKNOWN_SENSOR, f"sensor {sid!r} is not configured")
+        sm, radar = info
+        seq = d.seq
+        if not isinstance(d.t_ns, int) or not isinstance(seq, int) or seq < 0:
             return d, _no(d, Reason.INVALID, "t_ns and seq must be integers, seq >= 0")
-        if d.radar_data is not None and d.radar_data != sm.is_radar:
-            return d, _no(d, Reason.INVALID, f"sensor {d.sensor_id} is {'a radar' if sm.is_radar else 'not a radar'}; "
+        if d.radar_data is not None and d.radar_data != radar:
+            return d, _no(d, Reason.INVALID, f"sensor {sid} is {'a radar' if radar else 'not a radar'}; "
                           f"this message carries {'radar' if d.radar_data else 'Cartesian'} data")
         z = d.z
         if z.ndim != 1 or z.shape[0] not in sm.by_dim:
-            return d, _no(d, Reason.INVALID,
-                          f"z has shape {z.shape}; sensor {d.sensor_id} takes lengths {sorted(sm.by_dim)}")
+            return d, _no(d, Reason.INVALID, f"z has shape {z.shape}; sensor {sid} takes lengths {sorted(sm.by_dim)}")
         zl = z.tolist()
         for v in zl:
             if not -math.inf < v < math.inf:
                 return d, _no(d, Reason.INVALID, "z holds NaN or inf")
-        if sm.is_radar and not zl[0] > 0:
+        if radar and not zl[0] > 0:
             return d, _no(d, Reason.INVALID, f"range must be > 0, got {zl[0]}")
         m = len(zl)
         R = d.R
         if R is None:
             R = sm.default_R[m]
             if R is None:
-                return d, _no(d, Reason.INVALID, f"no noise: the message carries none and sensor {d.sensor_id} "
+                return d, _no(d, Reason.INVALID, f"no noise: the message carries none and sensor {sid} "
                               "has no default in the configuration")
-            return self._placed(Detection(d.sensor_id, d.t_ns, d.seq, z, R, d.arrival_ns, d.epoch), sm, zl, R)
-        if self._valid_R.get((d.sensor_id, m)) is R:
-            return self._placed(d, sm, zl, R)
+            d = Detection(sid, d.t_ns, seq, z, R, d.arrival_ns, d.epoch)
+            return d, _placed(d, radar, sm.ndim, zl, R.diagonal().tolist())
+        known = self._valid_R.get((sid, m))
+        if known is not None and known[0] is R:
+            return d, _placed(d, radar, sm.ndim, zl, known[1])
         if _positive_diagonal(R, m):
+            diag = R.diagonal().tolist()
             if not R.flags.writeable and R.base is None:  # nobody can change it: remember it
-                self._valid_R[(d.sensor_id, m)] = R
-            return self._placed(d, sm, zl, R)
+                self._valid_R[(sid, m)] = (R, diag)
+            return d, _placed(d, radar, sm.ndim, zl, diag)
         try:
             R = as_covariance("R", R, m)
         except InputError as e:
             return d, _no(d, Reason.BAD_COVARIANCE, str(e))
-        return self._placed(Detection(d.sensor_id, d.t_ns, d.seq, z, R, d.arrival_ns, d.epoch), sm, zl, R)
+        d = Detection(sid, d.t_ns, seq, z, R, d.arrival_ns, d.epoch)
+        return d, _placed(d, radar, sm.ndim, zl, R.diagonal().tolist())
 
-    @staticmethod
-    def _placed(d: Detection, sm: SensorModel, zl: list[float], R: np.ndarray) -> tuple[Detection, Refusal | None]:
-        """A radar return must place the target well enough to start a track: its position
-        covariance J R J' has the variance R_rr along the line of sight and r^2 R_bb (and r^2 R_ee)
-        across it, and a ratio of these over 1e12 (or a square that over- or underflows) makes a
-        new track's covariance numerically singular. Cartesian data are R itself, checked above."""
-        if not sm.is_radar:
-            return d, None
-        r2 = zl[0] * zl[0]
-        d2 = R.diagonal().tolist()
-        v = [d2[0], *(r2 * d2[k] for k in range(1, sm.ndim))]  # range, then the ndim - 1 angles
+
+def _placed(d: Detection, radar: bool, ndim: int, zl: list[float], d2: list[float]) -> Refusal | None:
+    """A radar return must place the target well enough to start a track: its position
+    covariance J R J' has the variance R_rr along the line of sight and r^2 R_bb (and r^2 R_ee)
+    across it, and a ratio of these over 1e12 (or a square that over- or underflows) makes a
+    new track's covariance numerically singular. Cartesian data are R itself, checked before.
+    d2: the diagonal of R."""
+    if not radar:
+        return None
+    r2 = zl[0] * zl[0]
+    if ndim == 2:
+        v0, v1 = d2[0], r2 * d2[1]
+        lo, hi = min(v0, v1), max(v0, v1)
+    else:
+        v = [d2[0], *(r2 * d2[k] for k in range(1, ndim))]  # range, then the ndim - 1 angles
         lo, hi = min(v), max(v)
-        if lo > 0.0 and hi < math.inf and hi <= 1e12 * lo:
-            return d, None
-        return d, _no(d, Reason.BAD_COVARIANCE, f"range {zl[0]:.6g} m with this noise places the target with "
-                      f"variances {lo:.3g} to {hi:.3g} m^2 across and along the line of sight: too ill-conditioned "
-                      "to start a track")
+    if lo > 0.0 and hi < math.inf and hi <= 1e12 * lo:
+        return None
+    return _no(d, Reason.BAD_COVARIANCE, f"range {zl[0]:.6g} m with this noise places the target with "
+               f"variances {lo:.3g} to {hi:.3g} m^2 across and along the line of sight: too ill-conditioned "
+               "to start a track")
 
 
 def _positive_diagonal(R: np.ndarray, m: int) -> bool:

@@ -75,16 +75,33 @@ def test_a_flood_costs_only_the_flooding_source() -> None:
     assert adds_up(q)
 
 
-def test_drain_is_round_robin_and_in_arrival_order() -> None:
+def test_drain_hands_out_the_oldest_across_sources_in_arrival_order() -> None:
+    """Interleaved sources come out in the order they were queued, whatever the batch size:
+    no batch holds a sample newer than one left behind for the next batch."""
     q = IntakeQueue(IntakeLimits(queue_max=10**4, queue_max_bytes=10**9, max_message_bytes=1000), known=KNOWN)
+    for i in range(300):  # radar1 twice as often as cam1, as the shipped sensors (10 Hz, 5 Hz)
+        offer(q, i, key("meas", "cam1" if i % 3 == 2 else "radar1"))
+    got: list[int] = []
+    for limit in (7, 1, 50, 13, 1000):
+        batch = [r[0] for r in q.drain(limit)]
+        assert batch == sorted(batch) and len(batch) == min(limit, 300 - len(got))
+        assert not got or batch[0] > got[-1], "a sample older than the last batch's newest was held back"
+        got.extend(batch)
+    assert got == list(range(300)) and len(q) == 0 and adds_up(q)
+
+
+def test_a_flood_delays_another_source_by_at_most_the_queue_bound() -> None:
+    """Fairness is enforced at offer time: radar1's flood is cut to its share of the queue, so
+    cam1's samples, offered after it, are handed out within the next queue_max samples."""
+    q = IntakeQueue(IntakeLimits(queue_max=100, queue_max_bytes=10**9, max_message_bytes=1000), known=KNOWN)
     for i in range(1000):
         offer(q, i, key("meas", "radar1"))
     for i in range(5):
-        offer(q, 2000 + i, key("meas", "cam1"))
-    batch = q.drain(10)
-    assert [r[0] for r in batch] == sorted(r[0] for r in batch)
+        assert offer(q, 2000 + i, key("meas", "cam1")) is None
+    batch = q.drain(100)
     assert sum(1 for r in batch if r[1].endswith("cam1")) == 5, "cam1 waited behind radar1's flood"
-    assert len(q.drain(10**6)) == 995 and len(q) == 0 and adds_up(q)
+    assert [r[0] for r in batch] == sorted(r[0] for r in batch)
+    assert len(q) == 0 and adds_up(q)
 
 
 def test_the_rate_limit_is_per_source() -> None:

@@ -36,6 +36,20 @@ def test_round_trip(tmp_path: Path) -> None:
     assert not r.truncated
 
 
+def test_a_batch_write_is_the_frames_of_record_writes(tmp_path: Path) -> None:
+    recs = _records(30)
+    with StreamWriter(tmp_path / "one.fstream", namespace="t") as w:
+        for r in recs:
+            w.write(*r)
+    with StreamWriter(tmp_path / "many.fstream", namespace="t") as w:
+        n = w.write_many(recs[:10]) + w.write_many([]) + w.write_many(recs[10:])
+        assert w.frames == 30
+    assert list(StreamReader(tmp_path / "many.fstream")) == recs
+    one, many = (tmp_path / "one.fstream").read_bytes(), (tmp_path / "many.fstream").read_bytes()
+    assert len(one) == len(many) and 0 < n < len(many)
+    assert one[-n:] == many[-n:], "the frames differ from those of one write per record"
+
+
 def test_cut_at_every_byte_of_the_last_frames(tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
     recs = _records(20)
     full = tmp_path / "s.fstream"

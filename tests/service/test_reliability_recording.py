@@ -7,6 +7,7 @@ import shutil
 from pathlib import Path
 
 import msgspec
+import pytest
 
 from fusion.config import RecordingConfig
 from fusion.io.stream_rotation import Retention, RotatingStream
@@ -40,6 +41,36 @@ def test_the_stream_follows_the_recording_and_rotates_by_size(tmp_path: Path) ->
     b.close()
     assert len(b.files) == 7 and b.files[1].name == "g-1.fstream"
     assert [r[0] for f in b.files for r in StreamReader(f)] == list(range(50)), "a record lost at a boundary"
+
+
+@pytest.mark.parametrize("batch", [1, 3, 7, 50], ids=lambda b: f"batch{b}")
+def test_a_batch_write_rotates_where_record_writes_do(tmp_path: Path, batch: int) -> None:
+    """write_many splits a batch at the size boundaries one write per record would: the same
+    files, the same records in each."""
+    one = RotatingStream(tmp_path / "one.fstream", namespace="demo", rotate_bytes=1000)
+    for i in range(50):
+        one.write(*rec(i))
+    one.close()
+    many = RotatingStream(tmp_path / "many.fstream", namespace="demo", rotate_bytes=1000)
+    recs = [rec(i) for i in range(50)]
+    for k in range(0, 50, batch):
+        many.write_many(recs[k:k + batch])
+    many.close()
+    assert many.frames == 50 and many.lost == 0
+    assert [[r for r in StreamReader(f)] for f in many.files] == [[r for r in StreamReader(f)] for f in one.files]
+
+
+def test_a_batch_that_cannot_be_written_is_counted_lost(tmp_path: Path) -> None:
+    d = tmp_path / "rec"
+    current = [d / "f-0000.rrd"]
+    s = RotatingStream(d / "f-0000.fstream", namespace="demo", rotate_bytes=10**9, follow=lambda: current[0])
+    s.write_many([rec(i) for i in range(5)])
+    shutil.rmtree(d)
+    d.write_text("now a file, not a folder")
+    current[0] = d / "f-0001.rrd"
+    s.write_many([rec(i) for i in range(5, 20)])
+    s.close()
+    assert s.error is not None and s.frames == 5 and s.lost == 15
 
 
 def test_a_stream_whose_folder_is_gone_stops_and_counts_what_it_lost(tmp_path: Path) -> None:

@@ -194,3 +194,92 @@ def test_malformed_and_invalid_are_counted_apart() -> None:
     c = pipe.counts()
     assert c.applied == 1
     assert {r.value: n for r, n in c.refused.items()} == {"malformed": 2, "invalid": 3, "unsupported_version": 1}
+
+
+def _radar_rule(elev: bool, rate: bool, stds: tuple[bool, bool, bool, bool]) -> str | None:
+    """The Radar noise rule, stated independently of messages.Radar.__post_init__'s fast path."""
+    if (stds[2] and not elev) or (stds[3] and not rate):
+        return "given for a value that is absent"
+    present = [stds[0], stds[1]] + ([stds[2]] if elev else []) + ([stds[3]] if rate else [])
+    return None if all(present) or not any(present) else "a standard deviation for every value present"
+
+
+@pytest.mark.parametrize("mask", range(64), ids=lambda k: f"{k:06b}")
+def test_every_radar_noise_combination_is_judged_by_the_rule(mask: int) -> None:
+    """All 64 combinations of elevation, range rate and the four standard deviations present:
+    decode accepts exactly those the rule accepts, and refuses the others with its reason."""
+    elev, rate, *stds = (bool(mask >> k & 1) for k in range(6))
+    fields = {"range_m": 10.0, "bearing_rad": 0.1}
+    for name, on, value in [("elevation_rad", elev, 0.2), ("range_rate_mps", rate, -1.0),
+                            ("range_std_m", stds[0], 1.0), ("bearing_std_rad", stds[1], 0.01),
+                            ("elevation_std_rad", stds[2], 0.01), ("range_rate_std_mps", stds[3], 0.5)]:
+        if on:
+            fields[name] = value
+    import msgspec
+
+    raw = msgspec.msgpack.encode({"type": "measurement", "sensor_id": "r1", "t_ns": 5, "seq": 0,
+                                  "data": {"type": "radar", **fields}})
+    want = _radar_rule(elev, rate, tuple(stds))  # type: ignore[arg-type]
+    if want is None:
+        assert m.decode_measurement(raw).data.has_noise == stds[0]
+    else:
+        with pytest.raises(m.InvalidMessageError, match=want):
+            m.decode_measurement(raw)
+
+
+@pytest.mark.parametrize("d", [0, 1, 2, 3, 4], ids=lambda d: f"d{d}")
+@pytest.mark.parametrize("noise", ["none", "std-", "std", "std+", "cov-", "cov", "both"], ids=str)
+def test_every_cartesian_shape_is_judged_by_the_rule(d: int, noise: str) -> None:
+    fields: dict[str, object] = {"pos_m": [1.0] * d}
+    if noise.startswith("std") or noise == "both":
+        fields["std_m"] = [1.0] * (d + {"std-": -1, "std+": 1}.get(noise, 0) if d else 1)
+    if noise.startswith("cov") or noise == "both":
+        fields["cov_m2"] = [1.0] * (d * d - (noise == "cov-"))
+    import msgspec
+
+    raw = msgspec.msgpack.encode({"type": "measurement", "sensor_id": "c", "t_ns": 5, "seq": 0,
+                                  "data": {"type": "cartesian", **fields}})
+    std, cov = fields.get("std_m"), fields.get("cov_m2")
+    ok = (d in (1, 2, 3) and not (std is not None and cov is not None)
+          and (std is None or len(std) == d) and (cov is None or len(cov) == d * d))  # type: ignore[arg-type]
+    if ok:
+        assert m.decode_measurement(raw).data.pos_m == [1.0] * d
+    else:
+        with pytest.raises(m.InvalidMessageError):
+            m.decode_measurement(raw)
+
+
+@pytest.mark.parametrize("n", [0, 1, 15, 16, 17, 65535, 65536], ids=lambda n: f"n{n}")
+def test_a_snapshot_of_encoded_estimates_is_the_snapshot_encoded(n: int) -> None:
+    """The service joins the bytes it published into the snapshot answer: the same bytes as
+    encoding the Snapshot, across the msgpack array header's three sizes."""
+    from fusion.io import wire
+
+    ests = [m.Estimate(track_id=i, t_ns=i, sensor_id="r1", seq=i, state=[float(i)], cov=[1.0], layout=["x"],
+                       model="cv", status="confirmed", revision=0) for i in range(n)]
+    got = wire.snapshot_of_encoded([m.encode(e) for e in ests])
+    assert got == wire.encode_snapshot(ests)
+    assert m.decode_snapshot(got).estimates == ests
+
+
+@pytest.mark.parametrize("case", ["imm", "cv-no-nis", "retracted-empty", "negative-seq"], ids=str)
+def test_the_estimate_encoder_writes_the_estimate_message(case: str) -> None:
+    """The service's encoder (positional, fusion.io.wire) and the schema's Estimate give the
+    same bytes, optional fields left off the same way."""
+    import numpy as np
+
+    from fusion.io import wire
+    from fusion.tracking.results import Estimate
+
+    layout = ("x", "vx", "y", "vy")
+    x, P = np.arange(4.0), np.arange(16.0).reshape(4, 4)
+    e = {
+        "imm": Estimate(7, 10**18, "radar1", 3, x, P, "confirmed", 2, 1.25, None, None, np.array([0.25, 0.75])),
+        "cv-no-nis": Estimate(7, -5, "cam1", 0, x, P, "tentative", 0, None, None, None),
+        "retracted-empty": Estimate(2**62, 5, "cam1", 9, np.zeros(0), np.zeros((0, 0)), "retracted", 4, None, None,
+                                    None),
+        "negative-seq": Estimate(1, 5, "cam1", -1, x, P, "predicted", 0, None, None, None),
+    }[case]
+    want = m.encode(wire.estimate_message(e, layout=layout, model="imm_cv"))
+    assert wire.estimate_encoder(layout, "imm_cv")(e) == want
+    assert m.decode_estimate(want).layout == (list(layout) if e.x.size else [])
