@@ -72,6 +72,26 @@ def update(x: np.ndarray, P: np.ndarray, y: np.ndarray, H: np.ndarray,
 
 
 @njit(cache=True, fastmath=False)
+def cholesky_into(S: np.ndarray, L: np.ndarray) -> bool:
+    """S = L L' into the lower triangle of L (the upper one is not written); False, with L
+    partly written, where S is not positive definite (a pivot that is not > 0, NaN included)."""
+    m = S.shape[0]
+    for j in range(m):
+        d = S[j, j]
+        for k in range(j):
+            d -= L[j, k] * L[j, k]
+        if not d > 0.0:
+            return False
+        L[j, j] = math.sqrt(d)
+        for i in range(j + 1, m):
+            s = S[i, j]
+            for k in range(j):
+                s -= L[i, k] * L[j, k]
+            L[i, j] = s / L[j, j]
+    return True
+
+
+@njit(cache=True, fastmath=False)
 def update_into(x: np.ndarray, P: np.ndarray, y: np.ndarray, H: np.ndarray, R: np.ndarray,
                 xn: np.ndarray, Pn: np.ndarray, S: np.ndarray) -> tuple[bool, float, float]:
     """The update written into xn (n,), Pn (n, n) and S (m, m); returns (ok, NIS, log-likelihood).
@@ -105,18 +125,8 @@ def update_into(x: np.ndarray, P: np.ndarray, y: np.ndarray, H: np.ndarray, R: n
             a = 0.5 * (S[i, j] + S[j, i])
             S[i, j] = a
             S[j, i] = a
-    for j in range(m):
-        d = S[j, j]
-        for k in range(j):
-            d -= L[j, k] * L[j, k]
-        if not d > 0.0:
-            return False, 0.0, 0.0
-        L[j, j] = math.sqrt(d)
-        for i in range(j + 1, m):
-            s = S[i, j]
-            for k in range(j):
-                s -= L[i, k] * L[j, k]
-            L[i, j] = s / L[j, j]
+    if not cholesky_into(S, L):
+        return False, 0.0, 0.0
     for i in range(m):
         for j in range(n):
             s = HP[i, j]

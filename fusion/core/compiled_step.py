@@ -35,7 +35,7 @@ import math
 import numpy as np
 from numba import njit
 
-from fusion.core.compiled import predict_into, update_into
+from fusion.core.compiled import cholesky_into, predict_into, update_into
 from fusion.core.measurement import KERNEL_CARTESIAN, KERNEL_RADAR2D
 
 OK, NONFINITE, SHAPE, BAD_Z, BAD_R, S_NOT_PD = 0, 1, 2, 3, 4, 5
@@ -82,20 +82,7 @@ def _checked_R(R: np.ndarray, Rs: np.ndarray) -> bool:
             if abs(R[i, j] - R[j, i]) > 1e-9 * scale:
                 return False
             Rs[i, j] = 0.5 * (R[i, j] + R[j, i])
-    L = np.empty((m, m))  # lower triangle only
-    for j in range(m):
-        d = Rs[j, j]
-        for k in range(j):
-            d -= L[j, k] * L[j, k]
-        if not d > 0.0:
-            return False
-        L[j, j] = math.sqrt(d)
-        for i in range(j + 1, m):
-            s = Rs[i, j]
-            for k in range(j):
-                s -= L[i, k] * L[j, k]
-            L[i, j] = s / L[j, j]
-    return True
+    return cholesky_into(Rs, np.empty((m, m)))
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")

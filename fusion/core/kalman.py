@@ -11,9 +11,14 @@ Update with z ~ N(h(x), R), H = dh/dx at x-:
 `KalmanFilter` and `ExtendedKalmanFilter` step one state with the compiled kernels of
 fusion.core.compiled, which evaluate the Joseph form expanded, P - K H P - (K H P)' + K S K'
 (algebraically the same as above); the tracker's batched gate loops the same kernels over a
-stack (fusion.core.compiled_stack). `predict_arrays` and `update_arrays` are a plain numpy
-reference of the equations above, broadcast over leading dimensions, with the product Joseph
-form; the tracker does not call them (tests/core/test_kernels.py checks the compiled kernels
+stack (fusion.core.compiled_stack). A linear motion model predicts in one compiled call with
+F(dt), Q(dt) cached per dt (fusion.core.transitions); CartesianPosition and Radar2D update in
+one compiled call that also evaluates h, H, the wrapped residual and the checks of z and of a
+given R (fusion.core.compiled_step). What that call refuses goes the numpy way (h, jacobian,
+residual, fusion.core.checks), which raises the typed error, so errors and messages are those of
+the numpy path; results agree with it to rounding (tests/core/test_step_kernels.py).
+`predict_arrays` and `update_arrays` are a plain numpy reference of the equations above,
+broadcast over leading dimensions, with the product Joseph form; the tracker does not call them (tests/core/test_kernels.py checks the compiled kernels
 against them, bench/core_step.py times them). They agree to rounding.
 """
 
