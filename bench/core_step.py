@@ -26,13 +26,36 @@ from collections.abc import Callable
 
 import numpy as np
 
+from fusion.core import compiled_step
 from fusion.core.kalman import ExtendedKalmanFilter, KalmanFilter, predict_arrays, update_arrays
 from fusion.core.measurement import CartesianPosition, Radar2D, wrap_angle
 from fusion.core.motion import ConstantVelocity
+from fusion.core.transitions import TransitionCache
 from fusion.scenarios import reference
 
 DT = 0.1
 DT_NS = 100_000_000
+FLOOR = "kernels alone (floor)"
+
+
+def floor_setup(cv: ConstantVelocity, meas: CartesianPosition | Radar2D, Z: np.ndarray, x0: np.ndarray,
+                P0: np.ndarray) -> tuple[Callable[[int], None], Callable[[], np.ndarray]]:
+    """The two compiled calls the public step makes (fusion.core.compiled_step), on fresh arrays,
+    with z checked as the validated filter does, but without the methods, dt from integer times,
+    the result objects or the fallbacks: what the step costs below the API."""
+    FQ = TransitionCache(cv)[DT]
+    n, m = x0.shape[0], meas.ndim_meas
+    st = {"x": x0.copy(), "P": P0.copy()}
+
+    def step(k: int) -> None:
+        x, P = np.empty(n), np.empty((n, n))
+        compiled_step.predict_fq(st["x"], st["P"], FQ, x, P)
+        xn, Pn, y, S = np.empty(n), np.empty((n, n)), np.empty(m), np.empty((m, m))
+        compiled_step.update_model(meas.kernel_kind, x, P, Z[k % len(Z)], meas.kernel_spec, meas.R,
+                                   compiled_step.CHECK_Z, xn, Pn, y, S)
+        st["x"], st["P"] = xn, Pn
+
+    return step, lambda: st["x"]
 
 
 CLOCK = time.process_time  # CPU seconds of this process: time spent waiting for a shared core is not counted
@@ -94,6 +117,7 @@ def kf_setups(n: int, seed: int = 0) -> dict[str, tuple[Callable[[int], None], C
         st["x"], st["P"] = x, P
 
     setups["textbook numpy"] = (np_step, lambda: st["x"])
+    setups[FLOOR] = floor_setup(cv, meas, Z, x0, P0)
     return setups
 
 
@@ -155,6 +179,7 @@ def ekf_setups(n: int) -> dict[str, tuple[Callable[[int], None], Callable[[], np
         st["x"], st["P"] = x, P
 
     setups["textbook numpy"] = (np_step, lambda: st["x"])
+    setups[FLOOR] = floor_setup(cv, meas, Z, x0, P0)
     return setups
 
 
