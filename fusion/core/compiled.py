@@ -2,9 +2,10 @@
 
 On 2x2 to 6x6 matrices each numpy call costs ~1 us here, so one numpy predict + update cannot
 go below ~20 us; these loops do the whole step in about one call. Compiled on first use and
-cached on disk (cache=True).
+cached on disk (cache=True). The `*_into` kernels write into arrays the caller allocated:
+returning a fresh array from a numba function costs more than the 4x4 arithmetic itself.
 
-predict:  x- = F x,  P- = F P F' + Q
+predict:  x- = F x,  P- = F P F' + Q  (predict_into also reports whether x- is finite)
 update:   S = H P H' + R = L L' (Cholesky; ok = False when S is not positive definite),
           W = L^-1 H P,  K' = L'^-1 W,  w = L^-1 y,  NIS = w'w,
           P+ = P - A - A' + K S K' with A = K H P (the Joseph form, expanded), symmetrised.
@@ -20,42 +21,99 @@ from numba import njit
 
 @njit(cache=True, fastmath=False)
 def predict_linear(x: np.ndarray, P: np.ndarray, F: np.ndarray, Q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """`predict_into` on fresh arrays."""
     n = x.shape[0]
-    xn = np.zeros(n)
-    FP = np.zeros((n, n))
+    xn = np.empty(n)
+    Pn = np.empty((n, n))
+    predict_into(x, P, F, Q, xn, Pn)
+    return xn, Pn
+
+
+@njit(cache=True, fastmath=False)
+def predict_into(x: np.ndarray, P: np.ndarray, F: np.ndarray, Q: np.ndarray,
+                 xn: np.ndarray, Pn: np.ndarray) -> bool:
+    """x- = F x into xn, P- = F P F' + Q into Pn; returns whether every component of xn is finite."""
+    n = x.shape[0]
+    FP = np.empty((n, n))
+    finite = True
     for i in range(n):
         s = 0.0
         for k in range(n):
             s += F[i, k] * x[k]
         xn[i] = s
+        finite = finite and math.isfinite(s)
         for j in range(n):
             s = 0.0
             for k in range(n):
                 s += F[i, k] * P[k, j]
             FP[i, j] = s
-    Pn = np.empty((n, n))
     for i in range(n):
         for j in range(n):
             s = 0.0
             for k in range(n):
                 s += FP[i, k] * F[j, k]
             Pn[i, j] = s + Q[i, j]
-    return xn, Pn
+    return finite
 
 
 @njit(cache=True, fastmath=False)
 def update(x: np.ndarray, P: np.ndarray, y: np.ndarray, H: np.ndarray,
            R: np.ndarray) -> tuple[bool, np.ndarray, np.ndarray, np.ndarray, float, float]:
+    """`update_into` on fresh arrays; on failure (ok False) x and P are returned unchanged."""
     n = x.shape[0]
     m = y.shape[0]
-    HP = np.zeros((m, n))  # H P (= (P H')')
+    xn = np.empty(n)
+    Pn = np.empty((n, n))
+    S = np.empty((m, m))
+    ok, nis, ll = update_into(x, P, y, H, R, xn, Pn, S)
+    if not ok:
+        return False, x, P, S, 0.0, 0.0
+    return True, xn, Pn, S, nis, ll
+
+
+@njit(cache=True, fastmath=False)
+def cholesky_into(S: np.ndarray, L: np.ndarray) -> bool:
+    """S = L L' into the lower triangle of L (the upper one is not written); False, with L
+    partly written, where S is not positive definite (a pivot that is not > 0, NaN included)."""
+    m = S.shape[0]
+    for j in range(m):
+        d = S[j, j]
+        for k in range(j):
+            d -= L[j, k] * L[j, k]
+        if not d > 0.0:
+            return False
+        L[j, j] = math.sqrt(d)
+        for i in range(j + 1, m):
+            s = S[i, j]
+            for k in range(j):
+                s -= L[i, k] * L[j, k]
+            L[i, j] = s / L[j, j]
+    return True
+
+
+@njit(cache=True, fastmath=False)
+def update_into(x: np.ndarray, P: np.ndarray, y: np.ndarray, H: np.ndarray, R: np.ndarray,
+                xn: np.ndarray, Pn: np.ndarray, S: np.ndarray) -> tuple[bool, float, float]:
+    """The update written into xn (n,), Pn (n, n) and S (m, m); returns (ok, NIS, log-likelihood).
+
+    ok is False (and xn, Pn unwritten) when S is not positive definite; S is filled either way.
+    """
+    n = x.shape[0]
+    m = y.shape[0]
+    mn = m * n
+    work = np.empty(4 * mn + m * m + m)  # one allocation for every intermediate
+    HP = work[:mn].reshape((m, n))  # H P (= (P H')')
+    W = work[mn:2 * mn].reshape((m, n))  # L^-1 H P (forward substitution)
+    Kt = work[2 * mn:3 * mn].reshape((m, n))  # L'^-1 W = S^-1 H P (back substitution)
+    KS = work[3 * mn:4 * mn].reshape((n, m))  # K S
+    L = work[4 * mn:4 * mn + m * m].reshape((m, m))  # lower triangle only is written and read
+    w = work[4 * mn + m * m:]  # L^-1 y
     for i in range(m):
         for j in range(n):
             s = 0.0
             for k in range(n):
                 s += H[i, k] * P[k, j]
             HP[i, j] = s
-    S = np.empty((m, m))
     for i in range(m):
         for j in range(m):
             s = 0.0
@@ -67,21 +125,8 @@ def update(x: np.ndarray, P: np.ndarray, y: np.ndarray, H: np.ndarray,
             a = 0.5 * (S[i, j] + S[j, i])
             S[i, j] = a
             S[j, i] = a
-    L = np.zeros((m, m))
-    for j in range(m):
-        d = S[j, j]
-        for k in range(j):
-            d -= L[j, k] * L[j, k]
-        if not d > 0.0:
-            return False, x, P, S, 0.0, 0.0
-        L[j, j] = math.sqrt(d)
-        for i in range(j + 1, m):
-            s = S[i, j]
-            for k in range(j):
-                s -= L[i, k] * L[j, k]
-            L[i, j] = s / L[j, j]
-    W = np.empty((m, n))  # L^-1 H P (forward substitution)
-    w = np.empty(m)  # L^-1 y
+    if not cholesky_into(S, L):
+        return False, 0.0, 0.0
     for i in range(m):
         for j in range(n):
             s = HP[i, j]
@@ -92,7 +137,6 @@ def update(x: np.ndarray, P: np.ndarray, y: np.ndarray, H: np.ndarray,
         for k in range(i):
             s -= L[i, k] * w[k]
         w[i] = s / L[i, i]
-    Kt = np.empty((m, n))  # L'^-1 W = S^-1 H P (back substitution)
     for i in range(m - 1, -1, -1):
         for j in range(n):
             s = W[i, j]
@@ -104,20 +148,17 @@ def update(x: np.ndarray, P: np.ndarray, y: np.ndarray, H: np.ndarray,
     for i in range(m):
         nis += w[i] * w[i]
         logdet += 2.0 * math.log(L[i, i])
-    xn = np.empty(n)
     for i in range(n):
         s = x[i]
         for k in range(m):
             s += Kt[k, i] * y[k]
         xn[i] = s
-    KS = np.zeros((n, m))  # K S
     for i in range(n):
         for j in range(m):
             s = 0.0
             for k in range(m):
                 s += Kt[k, i] * S[k, j]
             KS[i, j] = s
-    Pn = np.empty((n, n))
     for i in range(n):
         for j in range(n):
             a_ij = 0.0  # (K H P)[i, j]
@@ -134,4 +175,4 @@ def update(x: np.ndarray, P: np.ndarray, y: np.ndarray, H: np.ndarray,
             Pn[i, j] = a
             Pn[j, i] = a
     ll = -0.5 * (nis + logdet + m * math.log(2.0 * math.pi))
-    return True, xn, Pn, S, nis, ll
+    return True, nis, ll

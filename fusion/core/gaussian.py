@@ -1,8 +1,13 @@
-"""A Gaussian state estimate N(x, P) at an integer-nanosecond time."""
+"""A Gaussian state estimate N(x, P) at an integer-nanosecond time, and what an update produced.
+
+Both are immutable records (named tuples): a filter step makes three of them, and a named
+tuple is built in C, a few times cheaper than a frozen dataclass (whose constructor goes
+through object.__setattr__ once per field). Fields are read by name (state.x, update.nis).
+"""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -10,11 +15,11 @@ from numpy.typing import ArrayLike
 from fusion.core.checks import Array, as_covariance, as_vector
 
 
-@dataclass(frozen=True, slots=True)
-class GaussianState:
+class GaussianState(NamedTuple):
     """Mean x (n,), covariance P (n, n), valid at time t_ns.
 
-    Treat the arrays as read-only: every filter returns a new state and never writes into one.
+    The constructor does not check; `create` does. Treat the arrays as read-only: every filter
+    returns a new state and never writes into one.
     """
 
     x: Array
@@ -37,8 +42,7 @@ class GaussianState:
         return np.sqrt(np.diagonal(self.P))
 
 
-@dataclass(frozen=True, slots=True)
-class Update:
+class Update(NamedTuple):
     """What a measurement update produced.
 
     state: the posterior; y: the innovation z - h(x) (angles wrapped); S: its covariance;

@@ -11,9 +11,14 @@ Update with z ~ N(h(x), R), H = dh/dx at x-:
 `KalmanFilter` and `ExtendedKalmanFilter` step one state with the compiled kernels of
 fusion.core.compiled, which evaluate the Joseph form expanded, P - K H P - (K H P)' + K S K'
 (algebraically the same as above); the tracker's batched gate loops the same kernels over a
-stack (fusion.core.compiled_stack). `predict_arrays` and `update_arrays` are a plain numpy
-reference of the equations above, broadcast over leading dimensions, with the product Joseph
-form; the tracker does not call them (tests/core/test_kernels.py checks the compiled kernels
+stack (fusion.core.compiled_stack). A linear motion model predicts in one compiled call with
+F(dt), Q(dt) cached per dt (fusion.core.transitions); CartesianPosition and Radar2D update in
+one compiled call that also evaluates h, H, the wrapped residual and the checks of z and of a
+given R (fusion.core.compiled_step). What that call refuses goes the numpy way (h, jacobian,
+residual, fusion.core.checks), which raises the typed error, so errors and messages are those of
+the numpy path; results agree with it to rounding (tests/core/test_step_kernels.py).
+`predict_arrays` and `update_arrays` are a plain numpy reference of the equations above,
+broadcast over leading dimensions, with the product Joseph form; the tracker does not call them (tests/core/test_kernels.py checks the compiled kernels
 against them, bench/core_step.py times them). They agree to rounding.
 """
 
@@ -25,14 +30,22 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from fusion.core import compiled as _compiled
+from fusion.core import compiled_step as _step
 from fusion.core.checks import Array, as_covariance, as_vector
 from fusion.core.gaussian import GaussianState, Update
 from fusion.core.measurement import MeasurementModel
 from fusion.core.motion import LinearMotionModel, MotionModel
-from fusion.core.timebase import dt_seconds
+from fusion.core.timebase import NS_PER_S, dt_seconds
+from fusion.core.transitions import TransitionCache
 from fusion.errors import ConfigError, NumericalError, ShapeError
 
 LOG_2PI = math.log(2.0 * math.pi)
+_F64 = np.dtype(np.float64)
+_empty = np.empty
+_ndarray = np.ndarray
+_predict_fq, _update_model = _step.predict_fq, _step.update_model
+_NONFINITE, _CHECK_Z, _CHECK_R = _step.NONFINITE, _step.CHECK_Z, _step.CHECK_R
+_new = tuple.__new__  # GaussianState and Update are named tuples: built without their __new__
 
 
 def _swap(a: Array) -> Array:
@@ -122,15 +135,20 @@ class FilterBase:
 
     Stateless: predict and update take a GaussianState and return new objects. With
     check=True (the default) inputs are validated: shapes, finiteness, R positive definite.
+    The motion model is fixed at construction (`motion` is read-only).
     """
 
     def __init__(self, motion: MotionModel, *, check: bool = True) -> None:
-        self.motion = motion
+        self._motion = motion
         self.check = check
 
     @property
+    def motion(self) -> MotionModel:
+        return self._motion
+
+    @property
     def ndim_state(self) -> int:
-        return self.motion.ndim_state
+        return self._motion.ndim_state
 
     def initial(self, x: ArrayLike, P: ArrayLike, *, t_ns: int) -> GaussianState:
         """A validated initial state for this filter."""
@@ -151,9 +169,9 @@ class FilterBase:
         """x + B(dt) u, refused for a model that takes no input."""
         if u is None:
             return x
-        B = self.motion.control(dt)
+        B = self._motion.control(dt)
         if B is None:
-            raise ConfigError(f"{type(self.motion).__name__} takes no control input")
+            raise ConfigError(f"{type(self._motion).__name__} takes no control input")
         return x + B @ as_vector("u", u, B.shape[1])
 
     def _finite(self, x: Array) -> None:
@@ -162,12 +180,36 @@ class FilterBase:
 
 
 class ExtendedKalmanFilter(FilterBase):
-    """EKF over any motion model and any measurement model (exact KF when both are linear)."""
+    """EKF over any motion model and any measurement model (exact KF when both are linear).
+
+    Fast paths (same results to rounding, same errors): a linear motion model predicts with
+    F(dt) and Q(dt) cached per dt (fusion.core.transitions) in one compiled call; a model with
+    a compiled twin (MeasurementModel.kernel_kind) updates in one compiled call that checks z
+    and a given R itself (fusion.core.compiled_step). Anything that call refuses, and every
+    other model, takes the numpy path below it, which raises the typed error.
+    """
+
+    def __init__(self, motion: MotionModel, *, check: bool = True) -> None:
+        super().__init__(motion, check=check)
+        self._transitions = TransitionCache(motion) if motion.is_linear and isinstance(
+            motion, LinearMotionModel) else None
+        self._n, self._nn = motion.ndim_state, (motion.ndim_state, motion.ndim_state)
 
     def predict(self, state: GaussianState, t_ns: int, *, u: ArrayLike | None = None) -> GaussianState:
         """Predict to t_ns (>= state.t_ns); u is the control input if the model takes one."""
-        dt = dt_seconds(state.t_ns, t_ns)
-        m = self.motion
+        t = int(t_ns)
+        d = t - int(state.t_ns)
+        dt = d / NS_PER_S if d >= 0 else dt_seconds(state.t_ns, t)  # (which raises TimeError)
+        cache = self._transitions
+        if cache is not None and u is None:
+            x, P = _empty(self._n), _empty(self._nn)
+            status = _predict_fq(state.x, state.P, cache[dt], x, P)
+            if status == 0 or (status == _NONFINITE and not self.check):
+                return _new(GaussianState, (x, P, t))
+        return self._predict_numpy(state, t, dt, u)
+
+    def _predict_numpy(self, state: GaussianState, t_ns: int, dt: float, u: ArrayLike | None) -> GaussianState:
+        m = self._motion
         F = m.jacobian(state.x, dt)  # at the prior state
         x, P = _compiled.predict_linear(state.x, state.P, F, m.Q(state.x, dt))
         if not m.is_linear:
@@ -180,6 +222,23 @@ class ExtendedKalmanFilter(FilterBase):
         self, state: GaussianState, z: ArrayLike, model: MeasurementModel, *, R: ArrayLike | None = None
     ) -> Update:
         """Fold z (taken at state.t_ns) in; R defaults to the model's."""
+        kind = model.kernel_kind
+        if kind and type(z) is _ndarray and z.dtype is _F64 and z.ndim == 1 and (
+                R is None or (type(R) is _ndarray and R.dtype is _F64 and R.ndim == 2)):
+            x = state.x
+            n, m = x.shape[0], model.ndim_meas
+            xn, Pn, y, S = _empty(n), _empty((n, n)), _empty(m), _empty((m, m))
+            if R is None:
+                Ru, flags = model.R, (_CHECK_Z if self.check else 0)
+            else:
+                Ru, flags = R, (_CHECK_Z | _CHECK_R if self.check else 0)
+            status, nis, ll = _update_model(kind, x, state.P, z, model.kernel_spec, Ru, flags, xn, Pn, y, S)
+            if status == 0:
+                return _new(Update, (_new(GaussianState, (xn, Pn, state.t_ns)), y, S, nis, ll))
+        return self._update_numpy(state, z, model, R)
+
+    def _update_numpy(self, state: GaussianState, z: ArrayLike, model: MeasurementModel,
+                      R: ArrayLike | None) -> Update:
         zv, Rm = self._measurement(z, R, model)
         x = state.x
         y = model.residual(zv, model.h(x))
@@ -203,4 +262,4 @@ class KalmanFilter(ExtendedKalmanFilter):
                 f"KalmanFilter needs a linear measurement model, got {type(model).__name__}; "
                 "use ExtendedKalmanFilter or UnscentedKalmanFilter"
             )
-        return super().update(state, z, model, R=R)
+        return ExtendedKalmanFilter.update(self, state, z, model, R=R)

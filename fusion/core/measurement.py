@@ -11,6 +11,12 @@ has a pose (fusion.core.pose: p_world = Rot p_sensor + t); z is given in the sen
 
 `position(z)` is the world point a measurement stands for (initiation, display) and
 `position_cov(z, R)` its covariance J R J', J = d position / dz.
+
+`kernel_kind` and `kernel_spec` name a compiled twin of h, H and the residual
+(fusion.core.compiled_step, which documents the parameter layouts) that the single-state filters
+use; KERNEL_NONE (every model but CartesianPosition and Radar2D, and any subclass of those that
+does not set them again) means the filters call h, jacobian and residual. The parameters are
+taken at construction: a model's configuration does not change afterwards.
 """
 
 from __future__ import annotations
@@ -26,6 +32,7 @@ from fusion.core.pose import Pose
 from fusion.errors import ConfigError
 
 TWO_PI = 2.0 * np.pi
+KERNEL_NONE, KERNEL_CARTESIAN, KERNEL_RADAR2D = 0, 1, 2
 
 
 def wrap_angle_scalar(a: float) -> float:
@@ -61,6 +68,8 @@ class MeasurementModel(ABC):
     is_linear: bool = False
     angle_indices: tuple[int, ...] = ()
     broadcasts: bool = False
+    kernel_kind: int = KERNEL_NONE
+    kernel_spec: Array | None = None
 
     @abstractmethod
     def h(self, x: Array) -> Array:
@@ -126,6 +135,13 @@ class CartesianPosition(MeasurementModel):
 
     is_linear = True
     broadcasts = True
+    kernel_kind = KERNEL_CARTESIAN
+
+    def __init_subclass__(cls, **kwargs: object) -> None:
+        """A subclass may change h: it takes the generic path unless it sets kernel_kind again."""
+        super().__init_subclass__(**kwargs)
+        if "kernel_kind" not in cls.__dict__:
+            cls.kernel_kind = KERNEL_NONE
 
     def __init__(
         self,
@@ -158,6 +174,10 @@ class CartesianPosition(MeasurementModel):
         self.H = S if self.pose is None else self.pose.Rot.T @ S
         self.R = noise_covariance(R, m)
         self._idx = np.array(indices)
+        rot, t = (np.eye(m), np.zeros(m)) if self.pose is None else (self.pose.Rot, self.pose.t)
+        self.kernel_spec = np.concatenate(
+            [[ndim_state, self.pose is not None], self._idx, t, rot.ravel()]).astype(np.float64)
+        self.kernel_spec.flags.writeable = False
 
     def h(self, x: Array) -> Array:
         p = x[self._idx] if x.ndim == 1 else x[..., self._idx]

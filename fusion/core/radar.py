@@ -18,7 +18,14 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from fusion.core.checks import Array, as_vector
-from fusion.core.measurement import MeasurementModel, noise_covariance, wrap_angle, wrap_angle_scalar
+from fusion.core.measurement import (
+    KERNEL_NONE,
+    KERNEL_RADAR2D,
+    MeasurementModel,
+    noise_covariance,
+    wrap_angle,
+    wrap_angle_scalar,
+)
 from fusion.core.pose import Pose
 
 
@@ -29,6 +36,13 @@ class Radar2D(MeasurementModel):
     """
 
     broadcasts = True
+    kernel_kind = KERNEL_RADAR2D
+
+    def __init_subclass__(cls, **kwargs: object) -> None:
+        """A subclass may change h: it takes the generic path unless it sets kernel_kind again."""
+        super().__init_subclass__(**kwargs)
+        if "kernel_kind" not in cls.__dict__:
+            cls.kernel_kind = KERNEL_NONE
 
     def __init__(
         self,
@@ -51,6 +65,9 @@ class Radar2D(MeasurementModel):
         self.ndim_meas = 3 if range_rate else 2
         self.angle_indices = (1,)
         self.R = noise_covariance(R, self.ndim_meas)
+        self.kernel_spec = np.array([self._sx, self._sy, self.heading_rad, *self.pos_idx,
+                                     *self.vel_idx, range_rate], dtype=np.float64)
+        self.kernel_spec.flags.writeable = False
 
     def h(self, x: Array) -> Array:
         if x.ndim == 1:  # one state: math on floats
