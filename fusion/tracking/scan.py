@@ -199,6 +199,12 @@ def _assign_confirmed_first(g: Gated, ts: TrackSet, n_meas: int) -> list[int]:
     return sorted(out, key=lambda p: (mj[p], ti[p]))
 
 
+def measured_points(sm: SensorModel, dets: tuple[Detection, ...]) -> tuple[Array, Array]:
+    """World points and per-axis variances of a scan's detections, as run_scan computes them."""
+    return _measured_points(sm, Measured.of(tuple(d.z for d in dets), tuple(d.R for d in dets),  # type: ignore[arg-type]
+                                            tuple(sm.by_dim[d.z.shape[0]] for d in dets)))
+
+
 def _measured_points(sm: SensorModel, meas: Measured) -> tuple[Array, Array]:
     """World points of the scan's measurements and per-axis variances, one call per dimension."""
     M = meas.dims.size

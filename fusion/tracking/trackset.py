@@ -178,6 +178,43 @@ class TrackSet:
         var = vpp + 2.0 * dt * self.P[:, pi, vi] + dt * dt * self.P[:, vi, vi] + q2 * dt**3 / 3.0
         return pos + self.X[:, vi] * dt, np.maximum(var, 0.0)
 
+    def take(self, idx: np.ndarray) -> TrackSet:
+        """The rows `idx` (indices, in that order) as a set of their own."""
+        return TrackSet(Rows(**{f: None if (c := getattr(self, f)) is None else c[idx] for f in ROW_FIELDS}),
+                        self.layout)
+
+    def joined(self, other: TrackSet) -> TrackSet:
+        """This set's rows, then `other`'s (of the same layout)."""
+        return TrackSet(Rows(**{f: None if (c := getattr(self, f)) is None else np.concatenate([c, getattr(other, f)])
+                                for f in ROW_FIELDS}), self.layout)
+
+    def changed_since(self, old: TrackSet) -> np.ndarray:
+        """For each row: False if `old` holds a row of the same track id identical to it bit for
+        bit in every column, else True (a track old does not hold, or one whose row differs)."""
+        n = len(self)
+        if self is old:
+            return np.zeros(n, dtype=bool)
+        if self.ids.shape == old.ids.shape and np.array_equal(self.ids, old.ids):
+            at, found = np.arange(n), np.ones(n, dtype=bool)
+        else:
+            order = np.argsort(old.ids, kind="stable")
+            pos = np.clip(np.searchsorted(old.ids, self.ids, sorter=order), 0, max(len(old) - 1, 0))
+            at = order[pos] if len(old) else np.zeros(n, dtype=np.intp)
+            found = (old.ids[at] == self.ids) if len(old) else np.zeros(n, dtype=bool)
+        same = found.copy()
+        for f in ROW_FIELDS:
+            a = getattr(self, f)
+            if a is None or not same.any():
+                continue
+            b = getattr(old, f)[at[same]]
+            a = a[same]
+            a2, b2 = a.reshape(a.shape[0], -1), b.reshape(b.shape[0], -1)
+            if a2.dtype.kind == "f":  # bits, not values: -0.0 and 0.0 differ, NaN equals itself
+                a2, b2 = a2.view(np.int64), np.ascontiguousarray(b2).view(np.int64)
+            eq = (a2 == b2).all(axis=1)
+            same[np.flatnonzero(same)[~eq]] = False
+        return ~same
+
     def derive(self, *, update: tuple[np.ndarray, Rows] | None = None,
                counters: dict[str, np.ndarray] | None = None, delete: np.ndarray | None = None,
                born: Rows | None = None) -> TrackSet:
