@@ -12,7 +12,10 @@ targets of publishers.truth.mix_truth. Figures:
               k scans before the newest: its cost against the median in-order scan;
   memory:     bytes per live track held by the tracker (tracemalloc, after the stream) with the
               2 s window against lag_s = 0 (no replay window).
-Each figure is repeated; medians with min-max spreads are printed.
+Each figure is repeated; medians with min-max spreads are printed. Times are CPU seconds of this
+process (time.process_time; BLAS pinned to one thread by bench.__main__), which the other
+processes of a shared machine move far less than wall time. The collector is settled as `fusion
+serve` settles it (fusion.io.gc_tuning).
 """
 
 from __future__ import annotations
@@ -27,6 +30,7 @@ import msgspec
 import numpy as np
 
 from fusion.config import TrackerConfig, load_service_config
+from fusion.io.gc_tuning import settle_garbage_collector
 from fusion.io.wire import detection_of
 from fusion.tracking.detection import Detection
 from fusion.tracking.tracker import Tracker
@@ -62,10 +66,10 @@ def in_order(data: list[list[Detection]], cfg: TrackerConfig) -> tuple[Tracker, 
     tr = Tracker(cfg)
     out = []
     for k, scan in enumerate(data):
-        t0 = time.perf_counter()
+        t0 = time.process_time()
         tr.process(scan)
         if k >= WARM:
-            out.append(time.perf_counter() - t0)
+            out.append(time.process_time() - t0)
     return tr, out
 
 
@@ -87,10 +91,10 @@ def with_late(data: list[list[Detection]], cfg: TrackerConfig, *, fraction: floa
     tr = Tracker(cfg)
     out = []
     for k, batch in enumerate(calls):
-        t0 = time.perf_counter()
+        t0 = time.process_time()
         tr.process(batch)
         if k >= WARM:
-            out.append(time.perf_counter() - t0)
+            out.append(time.process_time() - t0)
     return tr, out, tr.counts.late_applied
 
 
@@ -104,9 +108,9 @@ def one_late(data: list[list[Detection]], cfg: TrackerConfig, back: int, pick: i
     for k, s in enumerate(data):
         tr.process([d for d in s if d is not held] if k == k_late else s)
     gc.collect()
-    t0 = time.perf_counter()
+    t0 = time.process_time()
     tr.process([held])
-    return time.perf_counter() - t0
+    return time.process_time() - t0
 
 
 def bytes_per_track(data: list[list[Detection]], cfg: TrackerConfig) -> tuple[float, int]:
@@ -129,6 +133,7 @@ def _spread(xs: list[float], scale: float = 1.0) -> str:
 
 
 def run(*, quick: bool = False) -> dict[str, float]:
+    settle_garbage_collector()  # as fusion serve does after start-up
     cfg = shipped_config()
     targets = 100
     duration_s = 6.0 if quick else 10.0

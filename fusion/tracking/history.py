@@ -21,6 +21,7 @@ from collections.abc import Set as AbstractSet
 from dataclasses import dataclass, field
 
 from fusion.tracking.detection import Detection
+from fusion.tracking.replay import Gates
 from fusion.tracking.results import Association, Estimate, ScanKey, TrackEvent
 from fusion.tracking.trackset import TrackSet
 
@@ -38,6 +39,7 @@ class Entry:
     events: dict[tuple[str, int, int, str], TrackEvent] = field(default_factory=dict)
     tally: Counter = field(default_factory=Counter)
     associations: list[Association] = field(default_factory=list)  # what its run did with each detection
+    gates: Gates | None = None  # its coarse pairs, when a partial re-run computed them
 
 
 @dataclass(frozen=True)

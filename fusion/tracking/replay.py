@@ -28,8 +28,6 @@ from collections import Counter
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
 
 from fusion.core.association import coarse_pairs
 from fusion.core.checks import Array
@@ -40,67 +38,122 @@ from fusion.tracking.trackset import TrackSet
 
 
 @dataclass(frozen=True)
+class Gates:
+    """A scan run's coarse pairs, by track id and detection seq, and its detections' world points
+    and variances (in the order of the scan's detections)."""
+
+    ids: np.ndarray
+    seqs: np.ndarray
+    mpos: Array
+    mvar: Array
+
+
+@dataclass(frozen=True)
 class Stored:
-    """A scan's previous run: its set before and after, detections, associations and tally."""
+    """A scan's previous run: its set before and after, detections, associations, tally and (if
+    known) its gates."""
 
     before: TrackSet
     after: TrackSet
     dets: tuple[Detection, ...]
     associations: list[Association]
     tally: Counter
+    gates: Gates | None = None
+
+
+@dataclass(frozen=True)
+class Hint:
+    """What the previous partial re-run left: its after-set differs from `source` (the stored
+    run's after-set) only in the rows of tracks `ids`."""
+
+    source: TrackSet
+    ids: np.ndarray
 
 
 @dataclass(frozen=True)
 class Partial:
     """A scan run again in part: its outcome (estimates and events of the re-run part only;
-    associations, tally and the after-set whole) and the track ids whose stored estimates and
-    events stand."""
+    associations, tally and the after-set whole), the track ids whose stored estimates and
+    events stand, its gates, and the hint for the next scan."""
 
     outcome: ScanOutcome
     kept: set[int]
+    gates: Gates
+    hint: Hint
     rerun_tracks: int
     rerun_dets: int
 
 
-def _pairs(ts: TrackSet, t_ns: int, mpos: Array, mvar: Array, ctx: ScanContext) -> tuple[np.ndarray, np.ndarray]:
-    tpos, tvar = ts.predicted_position(t_ns, ctx.q2)
-    return coarse_pairs(tpos, tvar, mpos, mvar, k=ctx.coarse_k)
-
-
-def _reach(old: Stored, ts: TrackSet, dets: tuple[Detection, ...], key: ScanKey, ctx: ScanContext,
-           mpos: Array, mvar: Array) -> tuple[np.ndarray, np.ndarray] | None:
-    """(rows of ts, indices of dets) in the components of the seeds (module docstring); None
-    when there is no seed (the stored run stands as it is)."""
-    t_ns = key[0]
+def gates_of(ts: TrackSet, key: ScanKey, dets: tuple[Detection, ...], ctx: ScanContext,
+             points: tuple[Array, Array] | None = None) -> Gates:
+    """The coarse pairs of scan `key` on ts (fusion.core.association.coarse_pairs, as run_scan
+    gates), by id and seq; `points`: the detections' world points if known."""
+    mpos, mvar = points if points is not None else measured_points(ctx.sensors[key[1]], dets)
+    tpos, tvar = ts.predicted_position(key[0], ctx.q2)
+    ci, cj = coarse_pairs(tpos, tvar, mpos, mvar, k=ctx.coarse_k)
     seqs = np.array([d.seq for d in dets], dtype=np.int64)
-    old_seqs = np.array([d.seq for d in old.dets], dtype=np.int64)
-    old_j = np.searchsorted(seqs, old_seqs)  # dets and old.dets are sorted by seq; old.dets within dets
-    ids = np.unique(np.concatenate([ts.ids, old.before.ids]))
-    n_t = ids.size
-    ci, cj = _pairs(ts, t_ns, mpos, mvar, ctx)
-    if len(old.dets):
-        sm = ctx.sensors[key[1]]
-        opos, ovar = measured_points(sm, old.dets)
-        oi, oj = _pairs(old.before, t_ns, opos, ovar, ctx)
-    else:
-        oi = oj = np.zeros(0, dtype=np.intp)
-    a = np.concatenate([np.searchsorted(ids, ts.ids[ci]), np.searchsorted(ids, old.before.ids[oi])])
-    b = n_t + np.concatenate([cj, old_j[oj]])
-    n = n_t + len(dets)
-    g = coo_matrix((np.ones(a.size), (a, b)), shape=(n, n))
-    _, label = connected_components(g, directed=False)
-    seed = np.zeros(n, dtype=bool)
-    seed[np.searchsorted(ids, ts.ids[ts.changed_since(old.before)])] = True
-    gone = ~np.isin(old.before.ids, ts.ids)
-    seed[np.searchsorted(ids, old.before.ids[gone])] = True
-    new_det = np.ones(len(dets), dtype=bool)
-    new_det[old_j] = False
-    seed[n_t + np.flatnonzero(new_det)] = True
-    if not seed.any():
+    return Gates(ts.ids[ci], seqs[cj], mpos, mvar)
+
+
+def gates_of_run(ts: TrackSet, dets: tuple[Detection, ...], out: ScanOutcome) -> Gates | None:
+    """The gates of a whole run of a scan on ts, from what run_scan returned."""
+    if out.coarse is None or out.variances is None:
         return None
-    hot = np.isin(label, np.unique(label[seed]))
-    rows = np.flatnonzero(hot[np.searchsorted(ids, ts.ids)])
-    return rows, np.flatnonzero(hot[n_t:])
+    ci, cj = out.coarse
+    return Gates(ts.ids[ci], np.array([d.seq for d in dets], dtype=np.int64)[cj], out.positions, out.variances)
+
+
+def _points(old: Stored, old_gates: Gates, dets: tuple[Detection, ...], seqs: np.ndarray, old_j: np.ndarray,
+            ctx: ScanContext, sensor_id: str) -> tuple[Array, Array]:
+    """World points of dets: the stored ones' from the old gates, the new ones' measured."""
+    if len(old.dets) == len(dets):
+        return old_gates.mpos, old_gates.mvar
+    new = np.ones(len(dets), dtype=bool)
+    new[old_j] = False
+    npos, nvar = measured_points(ctx.sensors[sensor_id], tuple(dets[j] for j in np.flatnonzero(new).tolist()))
+    d = npos.shape[1]
+    mpos, mvar = np.empty((len(dets), d)), np.empty((len(dets), d))
+    mpos[old_j], mvar[old_j] = old_gates.mpos, old_gates.mvar
+    mpos[new], mvar[new] = npos, nvar
+    return mpos, mvar
+
+
+def _new_gates(ts: TrackSet, changed: np.ndarray, old_gates: Gates, points: tuple[Array, Array], new: np.ndarray,
+               seqs: np.ndarray, t_ns: int, ctx: ScanContext) -> Gates:
+    """The coarse pairs on ts: the stored ones of unchanged tracks and stored detections (each pair
+    is decided by its track's row and its detection alone), and those of changed tracks or new
+    detections computed."""
+    mpos, mvar = points
+    keep = np.isin(old_gates.ids, ts.ids[~changed])
+    ids, sq = [old_gates.ids[keep]], [old_gates.seqs[keep]]
+    if changed.any() or new.any():
+        tpos, tvar = ts.predicted_position(t_ns, ctx.q2)
+        ch, nj = np.flatnonzero(changed), np.flatnonzero(new)
+        ci, cj = coarse_pairs(tpos[ch], tvar[ch], mpos, mvar, k=ctx.coarse_k)
+        ids.append(ts.ids[ch[ci]])
+        sq.append(seqs[cj])
+        if nj.size:
+            un = np.flatnonzero(~changed)
+            ci, cj = coarse_pairs(tpos[un], tvar[un], mpos[nj], mvar[nj], k=ctx.coarse_k)
+            ids.append(ts.ids[un[ci]])
+            sq.append(seqs[nj[cj]])
+    return Gates(np.concatenate(ids), np.concatenate(sq), mpos, mvar)
+
+
+def _reach(seed_ids: np.ndarray, seed_seqs: np.ndarray, old_gates: Gates, new_gates: Gates
+           ) -> tuple[np.ndarray, np.ndarray]:
+    """(track ids, detection seqs) in the components of the seeds over the pairs of both runs:
+    grown from the seeds along the pairs until nothing is added."""
+    e_ids = np.concatenate([new_gates.ids, old_gates.ids])
+    e_seqs = np.concatenate([new_gates.seqs, old_gates.seqs])
+    hot_ids, hot_seqs = np.unique(seed_ids), np.unique(seed_seqs)
+    while True:
+        m = np.isin(e_ids, hot_ids) | np.isin(e_seqs, hot_seqs)
+        more_ids = np.union1d(hot_ids, e_ids[m])
+        more_seqs = np.union1d(hot_seqs, e_seqs[m])
+        if more_ids.size == hot_ids.size and more_seqs.size == hot_seqs.size:
+            return hot_ids, hot_seqs
+        hot_ids, hot_seqs = more_ids, more_seqs
 
 
 def _tally_of(assoc: list[Association], events: list, *, skips: int = 0) -> Counter:
@@ -127,19 +180,29 @@ def _tally_of(assoc: list[Association], events: list, *, skips: int = 0) -> Coun
 
 
 def rerun(ts: TrackSet, key: ScanKey, dets: tuple[Detection, ...], ctx: ScanContext, old: Stored,
-          old_events: list) -> Partial | None:
+          old_events: list, hint: Hint | None = None) -> Partial | None:
     """Scan `key` run again on `ts` with `dets` (sorted by seq), reusing `old` where the late data
     cannot reach; None where the whole scan must run (module docstring). `old_events`: the events
-    the stored run reported."""
+    the stored run reported; `hint`: the previous scan's partial re-run, if any."""
     if old.tally[Tally.BIRTHS_REFUSED_CAPACITY] or old.tally[Tally.NUMERICAL_SKIPS]:
         return None  # the old run's counts are not per component: run the whole scan
-    mpos, mvar = measured_points(ctx.sensors[key[1]], dets)
-    reach = _reach(old, ts, dets, key, ctx, mpos, mvar)
-    if reach is None:  # nothing changed: the stored run stands, its after-set shared
+    seqs = np.array([d.seq for d in dets], dtype=np.int64)
+    old_j = np.searchsorted(seqs, np.array([d.seq for d in old.dets], dtype=np.int64))  # both sorted by seq
+    new = np.ones(len(dets), dtype=bool)
+    new[old_j] = False
+    changed = ts.changed_since(old.before, among=hint.ids if hint is not None and hint.source is old.before else None)
+    gone = old.before.ids[~np.isin(old.before.ids, ts.ids)]
+    old_gates = old.gates if old.gates is not None else gates_of(old.before, key, old.dets, ctx)
+    if not (changed.any() or gone.size or new.any()):  # nothing changed: the stored run stands
         if not np.array_equal(ts.ids, old.before.ids):
             return None  # the same rows in another order: the whole scan orders its output by them
         kept = {int(i) for i in ts.ids.tolist()} | {int(i) for i in old.after.ids.tolist()}
-        return Partial(ScanOutcome(old.after, [], [], old.associations, old.tally, mpos), kept, 0, 0)
+        return Partial(ScanOutcome(old.after, [], [], old.associations, old.tally, old_gates.mpos), kept,
+                       old_gates, Hint(old.after, np.zeros(0, np.int64)), 0, 0)
+    points = _points(old, old_gates, dets, seqs, old_j, ctx, key[1])
+    new_gates = _new_gates(ts, changed, old_gates, points, new, seqs, key[0], ctx)
+    hot_ids, hot_seqs = _reach(np.concatenate([ts.ids[changed], gone]), seqs[new], old_gates, new_gates)
+    reach = np.flatnonzero(np.isin(ts.ids, hot_ids)), np.flatnonzero(np.isin(seqs, hot_seqs))
     rows, js = reach
     if rows.size == len(ts) and js.size == len(dets):
         return None  # everything is reached: the whole scan is the same work
@@ -147,51 +210,56 @@ def rerun(ts: TrackSet, key: ScanKey, dets: tuple[Detection, ...], ctx: ScanCont
     sub = run_scan(ts.take(rows), key, sub_dets, ctx) if rows.size or js.size else None
     if sub is not None and (sub.tally[Tally.BIRTHS_REFUSED_CAPACITY] or sub.tally[Tally.NUMERICAL_SKIPS]):
         return None
-    rerun_seqs = {d.seq for d in sub_dets}
+    rerun_seqs = set(seqs[js].tolist())
     kept_assoc = [a for a in old.associations if a.seq not in rerun_seqs]
     kept_births = [a.track_id for a in kept_assoc if a.outcome == Outcome.BORN]
     n_born = len(kept_births) + (0 if sub is None else int(sub.tally[Tally.BIRTHS]))
     if n_born > ctx.max_tracks - len(ts):
         return None  # births the whole scan would refuse for capacity: its counts are global
-    after = _assemble(ts, rows, sub.after if sub is not None else None, old, rerun_seqs)
-    rerun_ids = set(ts.ids[rows].tolist()) | ({int(i) for i in sub.after.ids.tolist()} if sub is not None else set())
-    kept = ({int(i) for i in ts.ids.tolist()} | {int(i) for i in kept_births if i is not None}) - rerun_ids
+    after = _assemble(ts, rows, None if sub is None else sub.after, old, seqs[js])
+    touched = np.unique(np.concatenate([ts.ids[rows]] + ([] if sub is None else [sub.after.ids])))
+    kept = ({int(i) for i in ts.ids.tolist()} | {int(i) for i in kept_births if i is not None}) \
+        - set(touched.tolist())
     kept_events = [ev for ev in old_events if ev.track_id in kept]
     tally = _tally_of(kept_assoc, kept_events)
-    assoc = kept_assoc
-    estimates, events = [], []
+    assoc, estimates, events = kept_assoc, [], []
     if sub is not None:
         tally.update(sub.tally)
         assoc = sorted(kept_assoc + sub.associations, key=lambda a: a.seq)
         estimates, events = sub.estimates, sub.events
-    return Partial(ScanOutcome(after, estimates, events, assoc, tally, mpos), kept, int(rows.size), int(js.size))
+    return Partial(ScanOutcome(after, estimates, events, assoc, tally, new_gates.mpos), kept, new_gates,
+                   Hint(old.after, touched), int(rows.size), int(js.size))
 
 
-def _assemble(ts: TrackSet, rows: np.ndarray, sub_after: TrackSet | None, old: Stored, rerun_seqs: set[int]
+def _lookup(ids: np.ndarray, want: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(index in ids of each of want, found) for unique ids."""
+    if ids.size == 0:
+        return np.zeros(want.size, dtype=np.intp), np.zeros(want.size, dtype=bool)
+    order = np.argsort(ids, kind="stable")
+    at = order[np.clip(np.searchsorted(ids, want, sorter=order), 0, ids.size - 1)]
+    return at, ids[at] == want
+
+
+def _assemble(ts: TrackSet, rows: np.ndarray, sub_after: TrackSet | None, old: Stored, rerun_seqs: np.ndarray
               ) -> TrackSet:
     """The after-set in the whole scan's order: the survivors of ts in ts's order (re-run rows from
-    sub_after, the others from old.after), then the births by detection seq (those of re-run
-    detections from sub_after, the others' from old.after)."""
+    sub_after, the others from old.after: a kept row survives now iff it survived then), then the
+    births by detection seq (those of re-run detections from sub_after, the others' from old.after)."""
     A = old.after
     rerun = np.zeros(len(ts), dtype=bool)
     rerun[rows] = True
-    pool = A if sub_after is None else sub_after.joined(A)
     off = 0 if sub_after is None else len(sub_after)
-    in_a = {int(t): off + i for i, t in enumerate(A.ids.tolist())}
-    in_sub = {} if sub_after is None else {int(t): i for i, t in enumerate(sub_after.ids.tolist())}
-    order: list[int] = []
-    for r, tid in enumerate(ts.ids.tolist()):
-        i = in_sub.get(tid) if rerun[r] else in_a.get(tid)  # a kept row survives now iff it survived then
-        if i is not None:
-            order.append(i)
-    births: list[tuple[int, int]] = []  # (seq of the detection that started it, row in pool)
-    was = set(old.before.ids.tolist())
-    for i, tid in enumerate(A.ids.tolist()):
-        if tid not in was and int(A.origin_seq[i]) not in rerun_seqs:
-            births.append((int(A.origin_seq[i]), off + i))
-    now = set(ts.ids.tolist())
+    pool = A if sub_after is None else sub_after.joined(A)
+    at_a, in_a = _lookup(A.ids, ts.ids)
+    src, ok = off + at_a, in_a & ~rerun
+    born_a = np.flatnonzero(~np.isin(A.ids, old.before.ids) & ~np.isin(A.origin_seq, rerun_seqs))
+    born_idx, born_seq = [off + born_a], [A.origin_seq[born_a]]
     if sub_after is not None:
-        births.extend((int(sub_after.origin_seq[i]), i) for i, tid in enumerate(sub_after.ids.tolist())
-                      if tid not in now)
-    order.extend(i for _, i in sorted(births))
-    return pool.take(np.array(order, dtype=np.intp))
+        at_s, in_s = _lookup(sub_after.ids, ts.ids)
+        src = np.where(rerun, at_s, src)
+        ok = np.where(rerun, in_s, ok)
+        born_s = np.flatnonzero(~np.isin(sub_after.ids, ts.ids))
+        born_idx.append(born_s)
+        born_seq.append(sub_after.origin_seq[born_s])
+    bi, bs = np.concatenate(born_idx), np.concatenate(born_seq)
+    return pool.take(np.concatenate([src[ok], bi[np.argsort(bs, kind="stable")]]).astype(np.intp))

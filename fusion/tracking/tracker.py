@@ -30,7 +30,7 @@ from fusion.tracking.detection import ControlInput, Detection, Reason, Refusal
 from fusion.tracking.history import Entry, History, Rewind, revise, revise_events
 from fusion.tracking.intake import Intake
 from fusion.tracking.lifecycle import Lifecycle
-from fusion.tracking.replay import Partial, Stored, rerun
+from fusion.tracking.replay import Hint, Partial, Stored, gates_of_run, rerun
 from fusion.tracking.models import initial_covariance_diag, layout, make_filter, motion_model, sensor_models
 from fusion.tracking.results import (
     Counts,
@@ -177,16 +177,19 @@ class Tracker:
         assoc = []
         points: list[MeasuredPoint] = []
         ts = rw.start
+        hint = None
         for key in rw.keys:
             prev = rw.old.get(key)
             dets = tuple(sorted((prev.dets if prev else ()) + tuple(scans.get(key, ())), key=lambda d: d.seq))
-            part = self._rerun(ts, key, dets, prev, rw.after.get(key))
+            part = self._rerun(ts, key, dets, prev, rw.after.get(key), hint)
             out = part.outcome if part is not None else run_scan(ts, key, dets, self.ctx)
             kept = part.kept if part is not None else frozenset()
+            hint = part.hint if part is not None else None
             new = {d.seq for d in scans.get(key, ())}
             points.extend(MeasuredPoint(d.sensor_id, d.t_ns, d.seq, out.positions[j])
                           for j, d in enumerate(dets) if d.seq in new)
-            entry = Entry(key, dets, ts, tally=out.tally, associations=out.associations)
+            entry = Entry(key, dets, ts, tally=out.tally, associations=out.associations,
+                          gates=part.gates if part is not None else gates_of_run(ts, dets, out))
             estimates.extend(revise(entry, prev, out.estimates, kept))
             events.extend(revise_events(entry, prev, out.events, kept))
             assoc.extend(out.associations)
@@ -198,13 +201,13 @@ class Tracker:
                           tuple(points))
 
     def _rerun(self, ts: TrackSet, key: ScanKey, dets: tuple[Detection, ...], prev: Entry | None,
-               after: TrackSet | None) -> Partial | None:
+               after: TrackSet | None, hint: Hint | None) -> Partial | None:
         """A scan run before, run again in part (fusion.tracking.replay), or None: run it whole
         (a new scan; full replay chosen; control inputs, which move every track's prediction)."""
         if prev is None or after is None or not self.selective or self.inputs is not None:
             return None
-        return rerun(ts, key, dets, self.ctx, Stored(prev.before, after, prev.dets, prev.associations, prev.tally),
-                     list(prev.events.values()))
+        old = Stored(prev.before, after, prev.dets, prev.associations, prev.tally, prev.gates)
+        return rerun(ts, key, dets, self.ctx, old, list(prev.events.values()), hint)
 
     def _admit(self, items: Iterable[Detection | ControlInput]
                ) -> tuple[list[Detection], list[ControlInput], list[Refusal]]:

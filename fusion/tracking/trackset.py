@@ -188,12 +188,19 @@ class TrackSet:
         return TrackSet(Rows(**{f: None if (c := getattr(self, f)) is None else np.concatenate([c, getattr(other, f)])
                                 for f in ROW_FIELDS}), self.layout)
 
-    def changed_since(self, old: TrackSet) -> np.ndarray:
+    def changed_since(self, old: TrackSet, *, among: np.ndarray | None = None) -> np.ndarray:
         """For each row: False if `old` holds a row of the same track id identical to it bit for
-        bit in every column, else True (a track old does not hold, or one whose row differs)."""
+        bit in every column, else True (a track old does not hold, or one whose row differs).
+        `among`: the only track ids that can differ (the others are known to be old's rows)."""
         n = len(self)
         if self is old:
             return np.zeros(n, dtype=bool)
+        if among is not None:
+            out = np.zeros(n, dtype=bool)
+            rows = np.flatnonzero(np.isin(self.ids, among))
+            if rows.size:
+                out[rows] = self.take(rows).changed_since(old)
+            return out
         if self.ids.shape == old.ids.shape and np.array_equal(self.ids, old.ids):
             at, found = np.arange(n), np.ones(n, dtype=bool)
         else:
