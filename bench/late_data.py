@@ -10,6 +10,7 @@ targets of publishers.truth.mix_truth. Figures:
               a later scan, 1 to 25 scans later (inside the window); throughput against in order;
   k back:     after the stream in order but one measurement, that measurement alone, landing
               k scans before the newest: its cost against the median in-order scan;
+  (both also with selective_replay=False, the whole replay of before, as a second reference)
   memory:     bytes per live track held by the tracker (tracemalloc, after the stream) with the
               2 s window against lag_s = 0 (no replay window).
 Each figure is repeated; medians with min-max spreads are printed. Times are CPU seconds of this
@@ -61,20 +62,25 @@ def scans(n_targets: int, duration_s: float, *, seed: int = 0) -> list[list[Dete
     return [by_key[k] for k in sorted(by_key)]
 
 
-def in_order(data: list[list[Detection]], cfg: TrackerConfig) -> tuple[Tracker, list[float]]:
-    """One process call per scan; the seconds of each call after WARM."""
-    tr = Tracker(cfg)
+def _timed(tr: Tracker, calls: list[list[Detection]]) -> list[float]:
+    """One process call per batch; the CPU seconds of each call after the first WARM."""
     out = []
-    for k, scan in enumerate(data):
+    for k, batch in enumerate(calls):
         t0 = time.process_time()
-        tr.process(scan)
+        tr.process(batch)
         if k >= WARM:
             out.append(time.process_time() - t0)
-    return tr, out
+    return out
+
+
+def in_order(data: list[list[Detection]], cfg: TrackerConfig) -> tuple[Tracker, list[float]]:
+    """One process call per scan; the CPU seconds of each call after WARM."""
+    tr = Tracker(cfg)
+    return tr, _timed(tr, data)
 
 
 def with_late(data: list[list[Detection]], cfg: TrackerConfig, *, fraction: float = 0.1, max_back: int = 25,
-              seed: int = 1) -> tuple[Tracker, list[float], int]:
+              seed: int = 1, selective: bool = True) -> tuple[Tracker, list[float], int]:
     """Each measurement held back with probability `fraction`, delivered 1..max_back scans later."""
     rng = np.random.default_rng(seed)
     due: dict[int, list[Detection]] = {}
@@ -88,23 +94,19 @@ def with_late(data: list[list[Detection]], cfg: TrackerConfig, *, fraction: floa
                 now.append(d)
         calls.append(now + due.pop(k, []))
     calls[-1].extend(d for k in sorted(due) for d in due[k])
-    tr = Tracker(cfg)
-    out = []
-    for k, batch in enumerate(calls):
-        t0 = time.process_time()
-        tr.process(batch)
-        if k >= WARM:
-            out.append(time.process_time() - t0)
+    tr = Tracker(cfg, selective_replay=selective)
+    out = _timed(tr, calls)
     return tr, out, tr.counts.late_applied
 
 
-def one_late(data: list[list[Detection]], cfg: TrackerConfig, back: int, pick: int) -> float:
-    """Seconds of processing measurement `pick` of the scan `back` scans before the newest, after
-    all the others."""
+def one_late(data: list[list[Detection]], cfg: TrackerConfig, back: int, pick: int, *, selective: bool = True
+             ) -> float:
+    """CPU seconds of processing measurement `pick` of the scan `back` scans before the newest,
+    after all the others."""
     k_late = len(data) - 1 - back
     scan = data[k_late]
     held = scan[pick % len(scan)]
-    tr = Tracker(cfg)
+    tr = Tracker(cfg, selective_replay=selective)
     for k, s in enumerate(data):
         tr.process([d for d in s if d is not held] if k == k_late else s)
     gc.collect()
@@ -143,27 +145,37 @@ def run(*, quick: bool = False) -> dict[str, float]:
     print(f"late data: configs/service.toml tracker (IMM cv+ct, radar1 10 Hz + cam1 5 Hz, lag 2 s), {targets} "
           f"targets, {len(data)} scans, {n_timed} measurements timed; median [min-max] over {repeats} repeats")
     res: dict[str, float] = {}
-    base_rate, late_rate, ratios, scan_ms = [], [], [], []
-    for _ in range(repeats):  # interleaved: in order, then 10 % late, in each repeat
+    base_rate, scan_ms = [], []
+    late_rate: dict[bool, list[float]] = {True: [], False: []}
+    ratios: dict[bool, list[float]] = {True: [], False: []}
+    for _ in range(repeats):  # interleaved: in order, 10 % late selective, 10 % late whole, in each repeat
         _, t = in_order(data, cfg)
         base_rate.append(n_timed / sum(t))
         scan_ms.append(statistics.median(t) * 1e3)
-        _, t2, n_late = with_late(data, cfg)
-        late_rate.append(n_timed / sum(t2))
-        ratios.append(base_rate[-1] / late_rate[-1])
-    print(f"  in order:      {_spread(base_rate, 1e-3)} k measurements/s, median scan {_spread(scan_ms)} ms")
-    print(f"  10 % late ({n_late} applied late): {_spread(late_rate, 1e-3)} k measurements/s; in-order/late {_spread(ratios)}x "
-          f"(goal <= 2x)")
-    res.update(in_order_kps=statistics.median(base_rate) * 1e-3, late10_kps=statistics.median(late_rate) * 1e-3,
-               late10_ratio=statistics.median(ratios), scan_ms=statistics.median(scan_ms))
+        for sel in (True, False):
+            _, t2, n_late = with_late(data, cfg, selective=sel)
+            late_rate[sel].append(n_timed / sum(t2))
+            ratios[sel].append(base_rate[-1] / late_rate[sel][-1])
+    print(f"  in order:      {_spread(base_rate, 1e-3)} k measurements/s (CPU), median scan {_spread(scan_ms)} ms")
+    for sel, name in ((True, "selective replay"), (False, "whole replay (before)")):
+        print(f"  10 % late, {name} ({n_late} applied late, 1-25 scans back): {_spread(late_rate[sel], 1e-3)} k "
+              f"measurements/s; in-order/late {_spread(ratios[sel])}x (goal <= 2x)")
+    res.update(in_order_kps=statistics.median(base_rate) * 1e-3, late10_kps=statistics.median(late_rate[True]) * 1e-3,
+               late10_ratio=statistics.median(ratios[True]), late10_whole_ratio=statistics.median(ratios[False]),
+               scan_ms=statistics.median(scan_ms))
     backs = (0, 1, 5) if quick else (0, 1, 5, 20)
     scan_med = statistics.median(scan_ms)
     for back in backs:
-        c = [one_late(data, cfg, back, pick) * 1e3 for pick in range(repeats + 2)]
-        rel = [x / scan_med for x in c]
-        print(f"  {back:3d} scans back: {_spread(c)} ms, {_spread(rel)}x one in-order scan (goal at 20: <= 5x)")
+        c, w = [], []
+        for pick in range(repeats + 2):
+            c.append(one_late(data, cfg, back, pick) * 1e3)
+            w.append(one_late(data, cfg, back, pick, selective=False) * 1e3)
+        rel, wrel = [x / scan_med for x in c], [x / scan_med for x in w]
+        print(f"  {back:3d} scans back: {_spread(c)} ms, {_spread(rel)}x one in-order scan (goal at 20: <= 5x); "
+              f"whole replay {_spread(w)} ms, {_spread(wrel)}x")
         res[f"back_{back}_ms"] = statistics.median(c)
         res[f"back_{back}_ratio"] = statistics.median(rel)
+        res[f"back_{back}_whole_ratio"] = statistics.median(wrel)
     mem_w, n_w = bytes_per_track(data, cfg)
     no_window = msgspec.structs.replace(cfg, time=msgspec.structs.replace(cfg.time, lag_s=0.0))
     mem_0, n_0 = bytes_per_track(data, no_window)

@@ -32,7 +32,7 @@ import numpy as np
 from fusion.core.association import coarse_pairs
 from fusion.core.checks import Array
 from fusion.tracking.detection import Detection
-from fusion.tracking.results import Association, DeletionReason, EventKind, Outcome, ScanKey
+from fusion.tracking.results import Association, EventKind, Outcome, ScanKey
 from fusion.tracking.scan import ScanContext, ScanOutcome, Tally, measured_points, run_scan
 from fusion.tracking.trackset import TrackSet
 

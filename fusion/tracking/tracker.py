@@ -6,6 +6,9 @@
         rewind to the checkpoint before the earliest scan they touch        (history)
         for each scan from there, in (t_ns, sensor_id) order, old detections merged with new:
             outcome = run_scan(track set, scan)                             (scan)
+                      a scan run before is run again only where the late data reach:
+                      the coarse-gate components of changed tracks and new detections;
+                      the rest keeps its stored results, bit for bit      (replay)
             report its estimates and events as revisions of what it reported before
         commit the scans that fell behind the window                        (history, intake)
 
@@ -30,8 +33,8 @@ from fusion.tracking.detection import ControlInput, Detection, Reason, Refusal
 from fusion.tracking.history import Entry, History, Rewind, revise, revise_events
 from fusion.tracking.intake import Intake
 from fusion.tracking.lifecycle import Lifecycle
-from fusion.tracking.replay import Hint, Partial, Stored, gates_of_run, rerun
 from fusion.tracking.models import initial_covariance_diag, layout, make_filter, motion_model, sensor_models
+from fusion.tracking.replay import Hint, Partial, Stored, gates_of_run, rerun
 from fusion.tracking.results import (
     Counts,
     DeletionReason,

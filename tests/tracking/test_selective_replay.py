@@ -25,8 +25,8 @@ import pytest
 
 import fusion.tracking.tracker as tracker_module
 from fusion.config import TrackerConfig, load_service_config
-from fusion.tracking.trackset import ROW_FIELDS
 from fusion.tracking.tracker import Tracker
+from fusion.tracking.trackset import ROW_FIELDS
 from tests.tracking.streams import CLUTTER, Labeled, Sensor, constant_velocity, detect, in_order
 
 ROOT = Path(__file__).resolve().parents[2]
