@@ -34,7 +34,7 @@ from fusion.core.checks import Array
 from fusion.tracking.detection import Detection
 from fusion.tracking.results import Association, EventKind, Outcome, ScanKey
 from fusion.tracking.scan import ScanContext, ScanOutcome, Tally, measured_points, run_scan
-from fusion.tracking.trackset import TrackSet
+from fusion.tracking.trackset import TrackSet, member
 
 
 @dataclass(frozen=True)
@@ -124,7 +124,7 @@ def _new_gates(ts: TrackSet, changed: np.ndarray, old_gates: Gates, points: tupl
     is decided by its track's row and its detection alone), and those of changed tracks or new
     detections computed."""
     mpos, mvar = points
-    keep = np.isin(old_gates.ids, ts.ids[~changed])
+    keep = member(old_gates.ids, ts.ids[~changed])
     ids, sq = [old_gates.ids[keep]], [old_gates.seqs[keep]]
     if changed.any() or new.any():
         tpos, tvar = ts.predicted_position(t_ns, ctx.q2)
@@ -148,7 +148,7 @@ def _reach(seed_ids: np.ndarray, seed_seqs: np.ndarray, old_gates: Gates, new_ga
     e_seqs = np.concatenate([new_gates.seqs, old_gates.seqs])
     hot_ids, hot_seqs = np.unique(seed_ids), np.unique(seed_seqs)
     while True:
-        m = np.isin(e_ids, hot_ids) | np.isin(e_seqs, hot_seqs)
+        m = member(e_ids, hot_ids) | member(e_seqs, hot_seqs)
         more_ids = np.union1d(hot_ids, e_ids[m])
         more_seqs = np.union1d(hot_seqs, e_seqs[m])
         if more_ids.size == hot_ids.size and more_seqs.size == hot_seqs.size:
@@ -191,7 +191,7 @@ def rerun(ts: TrackSet, key: ScanKey, dets: tuple[Detection, ...], ctx: ScanCont
     new = np.ones(len(dets), dtype=bool)
     new[old_j] = False
     changed = ts.changed_since(old.before, among=hint.ids if hint is not None and hint.source is old.before else None)
-    gone = old.before.ids[~np.isin(old.before.ids, ts.ids)]
+    gone = old.before.ids[~member(old.before.ids, ts.ids)]
     old_gates = old.gates if old.gates is not None else gates_of(old.before, key, old.dets, ctx)
     if not (changed.any() or gone.size or new.any()):  # nothing changed: the stored run stands
         if not np.array_equal(ts.ids, old.before.ids):
@@ -202,7 +202,7 @@ def rerun(ts: TrackSet, key: ScanKey, dets: tuple[Detection, ...], ctx: ScanCont
     points = _points(old, old_gates, dets, seqs, old_j, ctx, key[1])
     new_gates = _new_gates(ts, changed, old_gates, points, new, seqs, key[0], ctx)
     hot_ids, hot_seqs = _reach(np.concatenate([ts.ids[changed], gone]), seqs[new], old_gates, new_gates)
-    reach = np.flatnonzero(np.isin(ts.ids, hot_ids)), np.flatnonzero(np.isin(seqs, hot_seqs))
+    reach = np.flatnonzero(member(ts.ids, hot_ids)), np.flatnonzero(member(seqs, hot_seqs))
     rows, js = reach
     if rows.size == len(ts) and js.size == len(dets):
         return None  # everything is reached: the whole scan is the same work
@@ -252,13 +252,13 @@ def _assemble(ts: TrackSet, rows: np.ndarray, sub_after: TrackSet | None, old: S
     pool = A if sub_after is None else sub_after.joined(A)
     at_a, in_a = _lookup(A.ids, ts.ids)
     src, ok = off + at_a, in_a & ~rerun
-    born_a = np.flatnonzero(~np.isin(A.ids, old.before.ids) & ~np.isin(A.origin_seq, rerun_seqs))
+    born_a = np.flatnonzero(~member(A.ids, old.before.ids) & ~member(A.origin_seq, rerun_seqs))
     born_idx, born_seq = [off + born_a], [A.origin_seq[born_a]]
     if sub_after is not None:
         at_s, in_s = _lookup(sub_after.ids, ts.ids)
         src = np.where(rerun, at_s, src)
         ok = np.where(rerun, in_s, ok)
-        born_s = np.flatnonzero(~np.isin(sub_after.ids, ts.ids))
+        born_s = np.flatnonzero(~member(sub_after.ids, ts.ids))
         born_idx.append(born_s)
         born_seq.append(sub_after.origin_seq[born_s])
     bi, bs = np.concatenate(born_idx), np.concatenate(born_seq)

@@ -37,6 +37,14 @@ class Status(IntEnum):
 _LABELS = {Status.TENTATIVE: "tentative", Status.CONFIRMED: "confirmed"}
 
 
+def member(values: np.ndarray, of: np.ndarray) -> np.ndarray:
+    """values[i] in `of`, for each i (np.isin by sorting `of`: faster on the small arrays here)."""
+    if of.size == 0 or values.size == 0:
+        return np.zeros(values.shape, dtype=bool)
+    srt = np.sort(of)
+    return srt[np.clip(np.searchsorted(srt, values), 0, srt.size - 1)] == values
+
+
 def track_id_for(sensor_id: str, seq: int, t_ns: int) -> int:
     """A track's id, derived from the measurement that started it: the first 63 bits of
     blake2b(sensor_id, seq, t_ns). The same under any arrival order; a sensor that reuses a seq
@@ -196,31 +204,33 @@ class TrackSet:
         if self is old:
             return np.zeros(n, dtype=bool)
         if among is not None:
+            rows = np.flatnonzero(member(self.ids, among))
+        else:
+            rows = np.arange(n)
+        if len(old) == 0 or rows.size == 0:
             out = np.zeros(n, dtype=bool)
-            rows = np.flatnonzero(np.isin(self.ids, among))
-            if rows.size:
-                out[rows] = self.take(rows).changed_since(old)
+            out[rows] = len(old) == 0
             return out
-        if self.ids.shape == old.ids.shape and np.array_equal(self.ids, old.ids):
-            at, found = np.arange(n), np.ones(n, dtype=bool)
+        if among is None and self.ids.shape == old.ids.shape and np.array_equal(self.ids, old.ids):
+            at, found = rows, np.ones(n, dtype=bool)
         else:
             order = np.argsort(old.ids, kind="stable")
-            pos = np.clip(np.searchsorted(old.ids, self.ids, sorter=order), 0, max(len(old) - 1, 0))
-            at = order[pos] if len(old) else np.zeros(n, dtype=np.intp)
-            found = (old.ids[at] == self.ids) if len(old) else np.zeros(n, dtype=bool)
+            at = order[np.clip(np.searchsorted(old.ids, self.ids[rows], sorter=order), 0, len(old) - 1)]
+            found = old.ids[at] == self.ids[rows]
         same = found.copy()
         for f in ROW_FIELDS:
             a = getattr(self, f)
             if a is None or not same.any():
                 continue
-            b = getattr(old, f)[at[same]]
-            a = a[same]
+            a, b = a[rows[same]], getattr(old, f)[at[same]]
             a2, b2 = a.reshape(a.shape[0], -1), b.reshape(b.shape[0], -1)
             if a2.dtype.kind == "f":  # bits, not values: -0.0 and 0.0 differ, NaN equals itself
-                a2, b2 = a2.view(np.int64), np.ascontiguousarray(b2).view(np.int64)
+                a2, b2 = a2.view(np.int64), b2.view(np.int64)
             eq = (a2 == b2).all(axis=1)
             same[np.flatnonzero(same)[~eq]] = False
-        return ~same
+        out = np.zeros(n, dtype=bool)
+        out[rows] = ~same
+        return out
 
     def derive(self, *, update: tuple[np.ndarray, Rows] | None = None,
                counters: dict[str, np.ndarray] | None = None, delete: np.ndarray | None = None,
