@@ -203,10 +203,7 @@ class TrackSet:
         n = len(self)
         if self is old:
             return np.zeros(n, dtype=bool)
-        if among is not None:
-            rows = np.flatnonzero(member(self.ids, among))
-        else:
-            rows = np.arange(n)
+        rows = np.arange(n) if among is None else np.flatnonzero(member(self.ids, among))
         if len(old) == 0 or rows.size == 0:
             out = np.zeros(n, dtype=bool)
             out[rows] = len(old) == 0
