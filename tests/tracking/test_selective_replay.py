@@ -178,3 +178,25 @@ def test_capacity_runs_the_whole_scan(monkeypatch: pytest.MonkeyPatch) -> None:
         full.process(b)
     assert full.counts.births_refused_capacity > 0
     assert st["whole"] > 0, st
+
+
+def test_changed_since_compares_bits_and_follows_ids() -> None:
+    """A row is unchanged only if the same track's row is identical bit for bit (-0.0 is not
+    0.0); rows are matched by id, not position; `among` limits the rows compared."""
+    tr = Tracker(shipped())
+    dets = mixed(11, n_targets=4, duration_s=1.0, spread_m=300.0)
+    for d in dets:
+        tr.process([d.det])
+    ts = tr.track_set
+    n = len(ts)
+    assert n >= 3
+    assert not ts.changed_since(ts).any()
+    flipped = ts.take(np.arange(n)[::-1])  # the same rows in another order
+    assert not flipped.changed_since(ts).any()
+    other = ts.take(np.arange(n))
+    other.X[1, 0] = -other.X[1, 0] if other.X[1, 0] != 0 else -0.0
+    assert other.changed_since(ts).tolist() == [i == 1 for i in range(n)]
+    assert not other.changed_since(ts, among=ts.ids[[0, 2]]).any()  # row 1 not among those compared
+    assert other.changed_since(ts, among=ts.ids[[1]]).tolist() == [i == 1 for i in range(n)]
+    fewer = ts.take(np.arange(1, n))
+    assert ts.changed_since(fewer).tolist() == [i == 0 for i in range(n)]  # a track the old set lacks
