@@ -42,9 +42,11 @@ def shipped(**lifecycle: int) -> TrackerConfig:
 
 
 def canon(x: object) -> object:
-    """A comparable form: arrays as (dtype, shape, bytes), dataclasses field by field."""
+    """A comparable form: arrays as (dtype, shape, bytes), dataclasses and Structs field by field."""
     if isinstance(x, np.ndarray):
         return (x.dtype.str, x.shape, x.tobytes())
+    if isinstance(x, msgspec.Struct):
+        return (type(x).__name__, tuple(canon(getattr(x, f)) for f in x.__struct_fields__))
     if dataclasses.is_dataclass(x) and not isinstance(x, type):
         return (type(x).__name__, tuple(canon(getattr(x, f.name)) for f in dataclasses.fields(x)))
     if isinstance(x, list | tuple):
