@@ -1,4 +1,4 @@
-"""`python -m bench [--quick] [--only e2e,core,tracker,gospa,recording,intake]`: every benchmark, one command.
+"""`python -m bench [--quick] [--only e2e,core,tracker,gospa,recording,intake,late]`: every benchmark, one command.
 `--only soak` (never in the default run): the service's memory over `--soak-s` seconds.
 
 Each benchmark measures its baselines in the same run, interleaved, and prints ratios. The
@@ -41,8 +41,8 @@ def machine() -> dict[str, str]:
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python -m bench")
     p.add_argument("--quick", action="store_true", help="fewer repeats and sizes (~1 minute)")
-    p.add_argument("--only", default="e2e,core,tracker,gospa,recording,intake",
-                   help="comma-separated: e2e, core, tracker, gospa, recording, intake; soak (not in the default)")
+    p.add_argument("--only", default="e2e,core,tracker,gospa,recording,intake,late",
+                   help="comma-separated: e2e, core, tracker, gospa, recording, intake, late; soak (not in the default)")
     p.add_argument("--soak-s", type=float, default=600.0, help="duration of the soak (default 600 s)")
     p.add_argument("--json", type=Path, help="also write the figures to this file")
     args = p.parse_args(argv)
@@ -76,6 +76,10 @@ def main(argv: list[str] | None = None) -> int:
             from bench import gospa
 
             results["gospa"] = gospa.run(quick=args.quick)
+        elif name == "late":
+            from bench import late_data
+
+            results["late"] = late_data.run(quick=args.quick)
         elif name == "recording":
             from bench import recording_cost
 

@@ -16,11 +16,14 @@ did are the sum over committed and live scans.
 from __future__ import annotations
 
 import bisect
+import hashlib
 from collections import Counter
+from collections.abc import Set as AbstractSet
 from dataclasses import dataclass, field
 
 from fusion.tracking.detection import Detection
-from fusion.tracking.results import Estimate, ScanKey, TrackEvent
+from fusion.tracking.replay import Gates
+from fusion.tracking.results import Association, Estimate, ScanKey, TrackEvent
 from fusion.tracking.trackset import TrackSet
 
 Revision = tuple[int, bytes, bool]  # (revision, signature, alive)
@@ -36,15 +39,19 @@ class Entry:
     emitted: dict[int, Revision] = field(default_factory=dict)  # track id -> latest reported
     events: dict[tuple[str, int, int, str], TrackEvent] = field(default_factory=dict)
     tally: Counter = field(default_factory=Counter)
+    associations: list[Association] = field(default_factory=list)  # what its run did with each detection
+    gates: Gates | None = None  # its coarse pairs, when a partial re-run computed them
 
 
 @dataclass(frozen=True)
 class Rewind:
-    """Where to start again: the track set to start from and the old entries of the scans to run."""
+    """Where to start again: the track set to start from, the old entries of the scans to run and
+    the track set each of them left (the next one's `before`, or the current set)."""
 
     start: TrackSet
     old: dict[ScanKey, Entry]
     keys: list[ScanKey]  # every scan to run, in order: old ones and new ones
+    after: dict[ScanKey, TrackSet]
 
 
 class History:
@@ -64,9 +71,10 @@ class History:
         old = self.entries[start:]
         keys = sorted(set(self.keys[start:]) | new_keys)
         ts = old[0].before if old else current
+        after = {e.key: (old[i + 1].before if i + 1 < len(old) else current) for i, e in enumerate(old)}
         del self.entries[start:]
         del self.keys[start:]
-        return Rewind(ts, {e.key: e for e in old}, keys)
+        return Rewind(ts, {e.key: e for e in old}, keys, after)
 
     @property
     def newest(self) -> ScanKey | None:
@@ -97,11 +105,16 @@ class History:
 
 
 def _signature(e: Estimate) -> bytes:
-    return e.x.tobytes() + e.P.tobytes() + e.status.encode()
+    """A 16-byte blake2b digest of the estimate's x, P and status: what decides whether a run
+    again changed it (kept for every estimate of the window: 16 bytes instead of the ~250 of
+    the bytes themselves; two different estimates share a digest with probability 2^-128)."""
+    return hashlib.blake2b(e.x.tobytes() + e.P.tobytes() + e.status.encode(), digest_size=16).digest()
 
 
-def revise(entry: Entry, prev: Entry | None, new: list[Estimate]) -> list[Estimate]:
-    """The estimates to report for a scan run (again): see the module docstring."""
+def revise(entry: Entry, prev: Entry | None, new: list[Estimate], kept: AbstractSet[int] = frozenset()
+           ) -> list[Estimate]:
+    """The estimates to report for a scan run (again): see the module docstring. `kept`: tracks
+    of a partial re-run (fusion.tracking.replay) whose stored estimates stand as they were."""
     old = prev.emitted if prev else {}
     out: list[Estimate] = []
     produced: set[int] = set()
@@ -118,6 +131,9 @@ def revise(entry: Entry, prev: Entry | None, new: list[Estimate]) -> list[Estima
     for tid in sorted(old):
         if tid in produced:
             continue
+        if tid in kept:
+            entry.emitted[tid] = old[tid]
+            continue
         rev, sig, alive = old[tid]
         if alive:
             rev += 1
@@ -126,10 +142,14 @@ def revise(entry: Entry, prev: Entry | None, new: list[Estimate]) -> list[Estima
     return out
 
 
-def revise_events(entry: Entry, prev: Entry | None, new: list[TrackEvent]) -> list[TrackEvent]:
-    """The events to report for a scan run (again): new ones, and withdrawals of vanished ones."""
+def revise_events(entry: Entry, prev: Entry | None, new: list[TrackEvent], kept: AbstractSet[int] = frozenset()
+                  ) -> list[TrackEvent]:
+    """The events to report for a scan run (again): new ones, and withdrawals of vanished ones;
+    the stored events of `kept` tracks stand (a partial re-run)."""
     old = prev.events if prev else {}
     entry.events = {ev.key: ev for ev in new}
+    if kept:
+        entry.events.update({k: ev for k, ev in old.items() if ev.track_id in kept})
     out = [ev for ev in new if ev.key not in old]
     out.extend(old[k].withdrawn() for k in sorted(old) if k not in entry.events)
     return out

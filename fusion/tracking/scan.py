@@ -73,6 +73,8 @@ class ScanOutcome:
     associations: list[Association]
     tally: Counter[Tally | DeletionReason]
     positions: Array  # (M, d) world points of the scan's measurements, in the order of its detections
+    variances: Array | None = None  # (M, d) their per-axis variances (the coarse gate's)
+    coarse: tuple[np.ndarray, np.ndarray] | None = None  # the coarse pairs (track rows, detection indices)
 
 
 def run_scan(ts: TrackSet, key: ScanKey, dets: tuple[Detection, ...], ctx: ScanContext) -> ScanOutcome:
@@ -134,7 +136,7 @@ def run_scan(ts: TrackSet, key: ScanKey, dets: tuple[Detection, ...], ctx: ScanC
     events.extend(sweep.events)
     after = updated.derive(counters=sweep.counters, delete=sweep.delete, born=born)
     estimates.sort(key=lambda e: e.track_id)
-    return ScanOutcome(after, estimates, events, assoc, tally, mpos)
+    return ScanOutcome(after, estimates, events, assoc, tally, mpos, mvar, (ci, cj))
 
 
 def _births_and_associations(ts: TrackSet, key: ScanKey, dets: tuple[Detection, ...], gated: Gated,
@@ -200,6 +202,12 @@ def _assign_confirmed_first(g: Gated, ts: TrackSet, n_meas: int) -> list[int]:
         taken[g.mj[chosen]] = True
     # pairs are sorted by (measurement, track): their positions in that order
     return np.sort(np.concatenate(out)).tolist() if out else []
+
+
+def measured_points(sm: SensorModel, dets: tuple[Detection, ...]) -> tuple[Array, Array]:
+    """World points and per-axis variances of a scan's detections, as run_scan computes them."""
+    return _measured_points(sm, Measured.of(tuple(d.z for d in dets), tuple(d.R for d in dets),  # type: ignore[arg-type]
+                                            tuple(sm.by_dim[d.z.shape[0]] for d in dets)))
 
 
 def _measured_points(sm: SensorModel, meas: Measured) -> tuple[Array, Array]:

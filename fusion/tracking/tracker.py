@@ -6,6 +6,9 @@
         rewind to the checkpoint before the earliest scan they touch        (history)
         for each scan from there, in (t_ns, sensor_id) order, old detections merged with new:
             outcome = run_scan(track set, scan)                             (scan)
+                      a scan run before is run again only where the late data reach:
+                      the coarse-gate components of changed tracks and new detections;
+                      the rest keeps its stored results, bit for bit      (replay)
             report its estimates and events as revisions of what it reported before
         commit the scans that fell behind the window                        (history, intake)
 
@@ -31,6 +34,7 @@ from fusion.tracking.history import Entry, History, Rewind, revise, revise_event
 from fusion.tracking.intake import Intake
 from fusion.tracking.lifecycle import Lifecycle
 from fusion.tracking.models import initial_covariance_diag, layout, make_filter, motion_model, sensor_models
+from fusion.tracking.replay import Hint, Partial, Stored, gates_of_run, rerun
 from fusion.tracking.results import (
     Counts,
     DeletionReason,
@@ -48,10 +52,13 @@ from fusion.tracking.trackset import Layout, Rows, Status, Track, TrackSet
 class Tracker:
     """Tracks many targets from many sensors; see the module docstring for the algorithm."""
 
-    def __init__(self, config: TrackerConfig) -> None:
+    def __init__(self, config: TrackerConfig, *, selective_replay: bool = True) -> None:
+        """selective_replay: replay late data only where it reaches (fusion.tracking.replay);
+        False replays every scan whole (the reference it is tested against)."""
         if not config.sensors:
             raise ConfigError("a tracker needs at least one sensor")
         self.config = config
+        self.selective = selective_replay
         control = config.control is not None
         self.motion = motion_model(config.motion, control=control)
         self.filter = make_filter(config.motion, self.motion)
@@ -173,16 +180,21 @@ class Tracker:
         assoc = []
         points: list[MeasuredPoint] = []
         ts = rw.start
+        hint = None
         for key in rw.keys:
             prev = rw.old.get(key)
             dets = tuple(sorted((prev.dets if prev else ()) + tuple(scans.get(key, ())), key=lambda d: d.seq))
-            out = run_scan(ts, key, dets, self.ctx)
+            part = self._rerun(ts, key, dets, prev, rw.after.get(key), hint)
+            out = part.outcome if part is not None else run_scan(ts, key, dets, self.ctx)
+            kept = part.kept if part is not None else frozenset()
+            hint = part.hint if part is not None else None
             new = {d.seq for d in scans.get(key, ())}
             points.extend(MeasuredPoint(d.sensor_id, d.t_ns, d.seq, out.positions[j])
                           for j, d in enumerate(dets) if d.seq in new)
-            entry = Entry(key, dets, ts, tally=out.tally)
-            estimates.extend(revise(entry, prev, out.estimates))
-            events.extend(revise_events(entry, prev, out.events))
+            entry = Entry(key, dets, ts, tally=out.tally, associations=out.associations,
+                          gates=part.gates if part is not None else gates_of_run(ts, dets, out))
+            estimates.extend(revise(entry, prev, out.estimates, kept))
+            events.extend(revise_events(entry, prev, out.events, kept))
             assoc.extend(out.associations)
             self.history.append(entry)
             ts = out.after
@@ -190,6 +202,15 @@ class Tracker:
         self._commit()
         return StepResult(tuple(estimates), tuple(events), tuple(refused), len(accepted), replays, tuple(assoc),
                           tuple(points))
+
+    def _rerun(self, ts: TrackSet, key: ScanKey, dets: tuple[Detection, ...], prev: Entry | None,
+               after: TrackSet | None, hint: Hint | None) -> Partial | None:
+        """A scan run before, run again in part (fusion.tracking.replay), or None: run it whole
+        (a new scan; full replay chosen; control inputs, which move every track's prediction)."""
+        if prev is None or after is None or not self.selective or self.inputs is not None:
+            return None
+        old = Stored(prev.before, after, prev.dets, prev.associations, prev.tally, prev.gates)
+        return rerun(ts, key, dets, self.ctx, old, list(prev.events.values()), hint)
 
     def _admit(self, items: Iterable[Detection | ControlInput]
                ) -> tuple[list[Detection], list[ControlInput], list[Refusal]]:

@@ -37,6 +37,14 @@ class Status(IntEnum):
 _LABELS = {Status.TENTATIVE: "tentative", Status.CONFIRMED: "confirmed"}
 
 
+def member(values: np.ndarray, of: np.ndarray) -> np.ndarray:
+    """values[i] in `of`, for each i (np.isin by sorting `of`: faster on the small arrays here)."""
+    if of.size == 0 or values.size == 0:
+        return np.zeros(values.shape, dtype=bool)
+    srt = np.sort(of)
+    return srt[np.clip(np.searchsorted(srt, values), 0, srt.size - 1)] == values
+
+
 def track_id_for(sensor_id: str, seq: int, t_ns: int) -> int:
     """A track's id, derived from the measurement that started it: the first 63 bits of
     blake2b(sensor_id, seq, t_ns). The same under any arrival order; a sensor that reuses a seq
@@ -177,6 +185,49 @@ class TrackSet:
             return pos, vpp + q2 * np.abs(dt)
         var = vpp + 2.0 * dt * self.P[:, pi, vi] + dt * dt * self.P[:, vi, vi] + q2 * dt**3 / 3.0
         return pos + self.X[:, vi] * dt, np.maximum(var, 0.0)
+
+    def take(self, idx: np.ndarray) -> TrackSet:
+        """The rows `idx` (indices, in that order) as a set of their own."""
+        return TrackSet(Rows(**{f: None if (c := getattr(self, f)) is None else c[idx] for f in ROW_FIELDS}),
+                        self.layout)
+
+    def joined(self, other: TrackSet) -> TrackSet:
+        """This set's rows, then `other`'s (of the same layout)."""
+        return TrackSet(Rows(**{f: None if (c := getattr(self, f)) is None else np.concatenate([c, getattr(other, f)])
+                                for f in ROW_FIELDS}), self.layout)
+
+    def changed_since(self, old: TrackSet, *, among: np.ndarray | None = None) -> np.ndarray:
+        """For each row: False if `old` holds a row of the same track id identical to it bit for
+        bit in every column, else True (a track old does not hold, or one whose row differs).
+        `among`: the only track ids that can differ (the others are known to be old's rows)."""
+        n = len(self)
+        if self is old:
+            return np.zeros(n, dtype=bool)
+        rows = np.arange(n) if among is None else np.flatnonzero(member(self.ids, among))
+        if len(old) == 0 or rows.size == 0:
+            out = np.zeros(n, dtype=bool)
+            out[rows] = len(old) == 0
+            return out
+        if among is None and self.ids.shape == old.ids.shape and np.array_equal(self.ids, old.ids):
+            at, found = rows, np.ones(n, dtype=bool)
+        else:
+            order = np.argsort(old.ids, kind="stable")
+            at = order[np.clip(np.searchsorted(old.ids, self.ids[rows], sorter=order), 0, len(old) - 1)]
+            found = old.ids[at] == self.ids[rows]
+        same = found.copy()
+        for f in ROW_FIELDS:
+            a = getattr(self, f)
+            if a is None or not same.any():
+                continue
+            a, b = a[rows[same]], getattr(old, f)[at[same]]
+            a2, b2 = a.reshape(a.shape[0], -1), b.reshape(b.shape[0], -1)
+            if a2.dtype.kind == "f":  # bits, not values: -0.0 and 0.0 differ, NaN equals itself
+                a2, b2 = a2.view(np.int64), b2.view(np.int64)
+            eq = (a2 == b2).all(axis=1)
+            same[np.flatnonzero(same)[~eq]] = False
+        out = np.zeros(n, dtype=bool)
+        out[rows] = ~same
+        return out
 
     def derive(self, *, update: tuple[np.ndarray, Rows] | None = None,
                counters: dict[str, np.ndarray] | None = None, delete: np.ndarray | None = None,

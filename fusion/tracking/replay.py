@@ -1,0 +1,265 @@
+"""Selective replay: a scan run again after late data re-runs only what the late data can reach.
+
+A scan was run on the track set B with detections D and produced the set A and its outcome (the
+history's Entry). Run again, it has the set B' and detections D' (D and the late ones):
+  seeds:    the rows of B' that differ bit for bit from B's row of the same track (or that B
+            lacks), the tracks of B that B' lacks, and the detections of D' not in D;
+  reach:    the connected components, over tracks (by id) and detections (by seq), of the coarse
+            pairs of both runs (fusion.core.association.coarse_pairs on B, D and on B', D'), that
+            hold a seed;
+  re-run:   run_scan on the tracks and detections of the reach alone;
+  the rest: every other track and detection saw the same rows, the same detections and the same
+            pairs in both runs, and every step of a scan after the coarse gate is per pair (fine
+            gate), per component of the pairs (the assignment: fusion.core.association.gnn_assign
+            decides each component alone) or per row (update, initiation, lifecycle), so its
+            results are the stored ones: its rows are copied from A, its estimates, events and
+            associations from the stored outcome.
+The after-set is assembled in the order the whole scan builds it (the surviving rows of B' in
+their order, then the births in detection order), so the result is bit-identical to running the
+whole scan. Where a rule counts over the whole scan the whole scan is run instead (`None`):
+capacity (the old run refused a birth for max_tracks, or the births would not fit now) and
+numerical skips in the old run (the batched gate then ran the whole dimension group pair by
+pair, which agrees with the batched math to 1e-12, not bit for bit).
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from dataclasses import dataclass
+
+import numpy as np
+
+from fusion.core.association import coarse_pairs
+from fusion.core.checks import Array
+from fusion.tracking.detection import Detection
+from fusion.tracking.results import Association, EventKind, Outcome, ScanKey
+from fusion.tracking.scan import ScanContext, ScanOutcome, Tally, measured_points, run_scan
+from fusion.tracking.trackset import TrackSet, member
+
+
+@dataclass(frozen=True)
+class Gates:
+    """A scan run's coarse pairs, by track id and detection seq, and its detections' world points
+    and variances (in the order of the scan's detections)."""
+
+    ids: np.ndarray
+    seqs: np.ndarray
+    mpos: Array
+    mvar: Array
+
+
+@dataclass(frozen=True)
+class Stored:
+    """A scan's previous run: its set before and after, detections, associations, tally and (if
+    known) its gates."""
+
+    before: TrackSet
+    after: TrackSet
+    dets: tuple[Detection, ...]
+    associations: list[Association]
+    tally: Counter
+    gates: Gates | None = None
+
+
+@dataclass(frozen=True)
+class Hint:
+    """What the previous partial re-run left: its after-set differs from `source` (the stored
+    run's after-set) only in the rows of tracks `ids`."""
+
+    source: TrackSet
+    ids: np.ndarray
+
+
+@dataclass(frozen=True)
+class Partial:
+    """A scan run again in part: its outcome (estimates and events of the re-run part only;
+    associations, tally and the after-set whole), the track ids whose stored estimates and
+    events stand, its gates, and the hint for the next scan."""
+
+    outcome: ScanOutcome
+    kept: set[int]
+    gates: Gates
+    hint: Hint
+    rerun_tracks: int
+    rerun_dets: int
+
+
+def gates_of(ts: TrackSet, key: ScanKey, dets: tuple[Detection, ...], ctx: ScanContext,
+             points: tuple[Array, Array] | None = None) -> Gates:
+    """The coarse pairs of scan `key` on ts (fusion.core.association.coarse_pairs, as run_scan
+    gates), by id and seq; `points`: the detections' world points if known."""
+    mpos, mvar = points if points is not None else measured_points(ctx.sensors[key[1]], dets)
+    tpos, tvar = ts.predicted_position(key[0], ctx.q2)
+    ci, cj = coarse_pairs(tpos, tvar, mpos, mvar, k=ctx.coarse_k)
+    seqs = np.array([d.seq for d in dets], dtype=np.int64)
+    return Gates(ts.ids[ci], seqs[cj], mpos, mvar)
+
+
+def gates_of_run(ts: TrackSet, dets: tuple[Detection, ...], out: ScanOutcome) -> Gates | None:
+    """The gates of a whole run of a scan on ts, from what run_scan returned."""
+    if out.coarse is None or out.variances is None:
+        return None
+    ci, cj = out.coarse
+    return Gates(ts.ids[ci], np.array([d.seq for d in dets], dtype=np.int64)[cj], out.positions, out.variances)
+
+
+def _points(old: Stored, old_gates: Gates, dets: tuple[Detection, ...], seqs: np.ndarray, old_j: np.ndarray,
+            ctx: ScanContext, sensor_id: str) -> tuple[Array, Array]:
+    """World points of dets: the stored ones' from the old gates, the new ones' measured."""
+    if len(old.dets) == len(dets):
+        return old_gates.mpos, old_gates.mvar
+    new = np.ones(len(dets), dtype=bool)
+    new[old_j] = False
+    npos, nvar = measured_points(ctx.sensors[sensor_id], tuple(dets[j] for j in np.flatnonzero(new).tolist()))
+    d = npos.shape[1]
+    mpos, mvar = np.empty((len(dets), d)), np.empty((len(dets), d))
+    mpos[old_j], mvar[old_j] = old_gates.mpos, old_gates.mvar
+    mpos[new], mvar[new] = npos, nvar
+    return mpos, mvar
+
+
+def _new_gates(ts: TrackSet, changed: np.ndarray, old_gates: Gates, points: tuple[Array, Array], new: np.ndarray,
+               seqs: np.ndarray, t_ns: int, ctx: ScanContext) -> Gates:
+    """The coarse pairs on ts: the stored ones of unchanged tracks and stored detections (each pair
+    is decided by its track's row and its detection alone), and those of changed tracks or new
+    detections computed."""
+    mpos, mvar = points
+    keep = member(old_gates.ids, ts.ids[~changed])
+    ids, sq = [old_gates.ids[keep]], [old_gates.seqs[keep]]
+    if changed.any() or new.any():
+        tpos, tvar = ts.predicted_position(t_ns, ctx.q2)
+        ch, nj = np.flatnonzero(changed), np.flatnonzero(new)
+        ci, cj = coarse_pairs(tpos[ch], tvar[ch], mpos, mvar, k=ctx.coarse_k)
+        ids.append(ts.ids[ch[ci]])
+        sq.append(seqs[cj])
+        if nj.size:
+            un = np.flatnonzero(~changed)
+            ci, cj = coarse_pairs(tpos[un], tvar[un], mpos[nj], mvar[nj], k=ctx.coarse_k)
+            ids.append(ts.ids[un[ci]])
+            sq.append(seqs[nj[cj]])
+    return Gates(np.concatenate(ids), np.concatenate(sq), mpos, mvar)
+
+
+def _reach(seed_ids: np.ndarray, seed_seqs: np.ndarray, old_gates: Gates, new_gates: Gates
+           ) -> tuple[np.ndarray, np.ndarray]:
+    """(track ids, detection seqs) in the components of the seeds over the pairs of both runs:
+    grown from the seeds along the pairs until nothing is added."""
+    e_ids = np.concatenate([new_gates.ids, old_gates.ids])
+    e_seqs = np.concatenate([new_gates.seqs, old_gates.seqs])
+    hot_ids, hot_seqs = np.unique(seed_ids), np.unique(seed_seqs)
+    while True:
+        m = member(e_ids, hot_ids) | member(e_seqs, hot_seqs)
+        more_ids = np.union1d(hot_ids, e_ids[m])
+        more_seqs = np.union1d(hot_seqs, e_seqs[m])
+        if more_ids.size == hot_ids.size and more_seqs.size == hot_seqs.size:
+            return hot_ids, hot_seqs
+        hot_ids, hot_seqs = more_ids, more_seqs
+
+
+def _tally_of(assoc: list[Association], events: list, *, skips: int = 0) -> Counter:
+    """The tally of a part of a scan from what it did (fusion.tracking.scan counts the same):
+    updates, births and unassigned (in a gate, not taken) from the associations; confirmations
+    and deletions from the events. Used for parts without capacity refusals."""
+    t: Counter = Counter()
+    for a in assoc:
+        if a.outcome == Outcome.UPDATED:
+            t[Tally.UPDATES] += 1
+        else:
+            if a.gated:
+                t[Tally.UNASSIGNED] += 1
+            if a.outcome == Outcome.BORN:
+                t[Tally.BIRTHS] += 1
+    for ev in events:
+        if ev.kind == EventKind.CONFIRMED:
+            t[Tally.CONFIRMATIONS] += 1
+        elif ev.kind == EventKind.DELETED and ev.reason is not None:
+            t[ev.reason] += 1
+    if skips:
+        t[Tally.NUMERICAL_SKIPS] += skips
+    return t
+
+
+def rerun(ts: TrackSet, key: ScanKey, dets: tuple[Detection, ...], ctx: ScanContext, old: Stored,
+          old_events: list, hint: Hint | None = None) -> Partial | None:
+    """Scan `key` run again on `ts` with `dets` (sorted by seq), reusing `old` where the late data
+    cannot reach; None where the whole scan must run (module docstring). `old_events`: the events
+    the stored run reported; `hint`: the previous scan's partial re-run, if any."""
+    if old.tally[Tally.BIRTHS_REFUSED_CAPACITY] or old.tally[Tally.NUMERICAL_SKIPS]:
+        return None  # the old run's counts are not per component: run the whole scan
+    seqs = np.array([d.seq for d in dets], dtype=np.int64)
+    old_j = np.searchsorted(seqs, np.array([d.seq for d in old.dets], dtype=np.int64))  # both sorted by seq
+    new = np.ones(len(dets), dtype=bool)
+    new[old_j] = False
+    changed = ts.changed_since(old.before, among=hint.ids if hint is not None and hint.source is old.before else None)
+    gone = old.before.ids[~member(old.before.ids, ts.ids)]
+    old_gates = old.gates if old.gates is not None else gates_of(old.before, key, old.dets, ctx)
+    if not (changed.any() or gone.size or new.any()):  # nothing changed: the stored run stands
+        if not np.array_equal(ts.ids, old.before.ids):
+            return None  # the same rows in another order: the whole scan orders its output by them
+        kept = {int(i) for i in ts.ids.tolist()} | {int(i) for i in old.after.ids.tolist()}
+        return Partial(ScanOutcome(old.after, [], [], old.associations, old.tally, old_gates.mpos), kept,
+                       old_gates, Hint(old.after, np.zeros(0, np.int64)), 0, 0)
+    points = _points(old, old_gates, dets, seqs, old_j, ctx, key[1])
+    new_gates = _new_gates(ts, changed, old_gates, points, new, seqs, key[0], ctx)
+    hot_ids, hot_seqs = _reach(np.concatenate([ts.ids[changed], gone]), seqs[new], old_gates, new_gates)
+    reach = np.flatnonzero(member(ts.ids, hot_ids)), np.flatnonzero(member(seqs, hot_seqs))
+    rows, js = reach
+    if rows.size == len(ts) and js.size == len(dets):
+        return None  # everything is reached: the whole scan is the same work
+    sub_dets = tuple(dets[j] for j in js.tolist())
+    sub = run_scan(ts.take(rows), key, sub_dets, ctx) if rows.size or js.size else None
+    if sub is not None and (sub.tally[Tally.BIRTHS_REFUSED_CAPACITY] or sub.tally[Tally.NUMERICAL_SKIPS]):
+        return None
+    rerun_seqs = set(seqs[js].tolist())
+    kept_assoc = [a for a in old.associations if a.seq not in rerun_seqs]
+    kept_births = [a.track_id for a in kept_assoc if a.outcome == Outcome.BORN]
+    n_born = len(kept_births) + (0 if sub is None else int(sub.tally[Tally.BIRTHS]))
+    if n_born > ctx.max_tracks - len(ts):
+        return None  # births the whole scan would refuse for capacity: its counts are global
+    after = _assemble(ts, rows, None if sub is None else sub.after, old, seqs[js])
+    touched = np.unique(np.concatenate([ts.ids[rows]] + ([] if sub is None else [sub.after.ids])))
+    kept = ({int(i) for i in ts.ids.tolist()} | {int(i) for i in kept_births if i is not None}) \
+        - set(touched.tolist())
+    kept_events = [ev for ev in old_events if ev.track_id in kept]
+    tally = _tally_of(kept_assoc, kept_events)
+    assoc, estimates, events = kept_assoc, [], []
+    if sub is not None:
+        tally.update(sub.tally)
+        assoc = sorted(kept_assoc + sub.associations, key=lambda a: a.seq)
+        estimates, events = sub.estimates, sub.events
+    return Partial(ScanOutcome(after, estimates, events, assoc, tally, new_gates.mpos), kept, new_gates,
+                   Hint(old.after, touched), int(rows.size), int(js.size))
+
+
+def _lookup(ids: np.ndarray, want: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(index in ids of each of want, found) for unique ids."""
+    if ids.size == 0:
+        return np.zeros(want.size, dtype=np.intp), np.zeros(want.size, dtype=bool)
+    order = np.argsort(ids, kind="stable")
+    at = order[np.clip(np.searchsorted(ids, want, sorter=order), 0, ids.size - 1)]
+    return at, ids[at] == want
+
+
+def _assemble(ts: TrackSet, rows: np.ndarray, sub_after: TrackSet | None, old: Stored, rerun_seqs: np.ndarray
+              ) -> TrackSet:
+    """The after-set in the whole scan's order: the survivors of ts in ts's order (re-run rows from
+    sub_after, the others from old.after: a kept row survives now iff it survived then), then the
+    births by detection seq (those of re-run detections from sub_after, the others' from old.after)."""
+    A = old.after
+    rerun = np.zeros(len(ts), dtype=bool)
+    rerun[rows] = True
+    off = 0 if sub_after is None else len(sub_after)
+    pool = A if sub_after is None else sub_after.joined(A)
+    at_a, in_a = _lookup(A.ids, ts.ids)
+    src, ok = off + at_a, in_a & ~rerun
+    born_a = np.flatnonzero(~member(A.ids, old.before.ids) & ~member(A.origin_seq, rerun_seqs))
+    born_idx, born_seq = [off + born_a], [A.origin_seq[born_a]]
+    if sub_after is not None:
+        at_s, in_s = _lookup(sub_after.ids, ts.ids)
+        src = np.where(rerun, at_s, src)
+        ok = np.where(rerun, in_s, ok)
+        born_s = np.flatnonzero(~member(sub_after.ids, ts.ids))
+        born_idx.append(born_s)
+        born_seq.append(sub_after.origin_seq[born_s])
+    bi, bs = np.concatenate(born_idx), np.concatenate(born_seq)
+    return pool.take(np.concatenate([src[ok], bi[np.argsort(bs, kind="stable")]]).astype(np.intp))
