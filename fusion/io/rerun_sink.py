@@ -96,6 +96,9 @@ class RerunSink:
         self.rec.log("meta", rr.TextDocument(json.dumps(info, sort_keys=True), media_type="text/plain"), static=True)
         # the names of an IMM's modes for their probability series (meta "modes"; else "mode j")
         self.mode_names: tuple[str, ...] = tuple(str(n) for n in (meta or {}).get("modes", ()))
+        # each sensor's measured components as (name, unit), to split the gain by unit (meta
+        # "measured", fusion.io.gain_groups.measured_components; else one unsplit gain view)
+        self.measured: dict[str, list[list[list[str]]]] = dict((meta or {}).get("measured", {}))
         self._send_blueprint()
 
     # ---- continuity across files -----------------------------------------------------------------
@@ -253,7 +256,8 @@ class RerunSink:
         rr = self._rr
         kw = {"names": list(c.style["names"]), "colors": [list(x) for x in c.style["colors"]]}
         if c.style.get("points"):
-            self.rec.log(entity, rr.SeriesPoints(marker_sizes=[1.5] * len(kw["names"]), **kw), static=True)
+            size = float(c.style.get("marker_size", 1.5))
+            self.rec.log(entity, rr.SeriesPoints(marker_sizes=[size] * len(kw["names"]), **kw), static=True)
         else:
             self.rec.log(entity, rr.SeriesLines(widths=list(c.style.get("widths", [2.0] * len(kw["names"]))), **kw),
                          static=True)
