@@ -22,7 +22,8 @@ z = 0 plane; track labels are fusion.io.labels.short_id of the id):
   world/meas/<sensor>    measured points, coloured by their association outcome
   world/truth            true positions
   world/tracks/<label>/{now,cov,start,end}  a viewed track at the cursor: labelled point, 2-sigma
-                         ellipse (ellipsoid in 3-D), start and end markers
+                         ellipse (ellipsoid in 3-D), start and end markers; .../trail: earlier
+                         2-sigma ellipses, faint, spaced apart (fusion.io.trail)
   tracks/<label>/...     a viewed track's time series (see fusion.io.blueprint.TRACK_VIEWS)
   metrics/{ospa,gospa}   set distances to truth (fusion.io.derive), counts/<name>: the tracker's counters
   meta                   static JSON: layout, position/velocity indices, sensors
