@@ -164,7 +164,7 @@ class RerunSink:
             used = np.array([(a := outcome.get((m.sensor_id, m.seq))) is not None and a.outcome in _USED for m in ms])
             rgba = np.where(used[:, None], _RGBA_USED, _RGBA_CLUTTER).astype(np.uint8)
             arr = t_ns if arrival_ns is None else arrival_ns
-            self.col(f"world/meas/{sensor_id}", "points", radius=-2.5).add(
+            self.col(f"world/meas/{sensor_id}", "points", radius=-1.75).add(
                 t_ns, step, arr, p=world(np.stack([m.position for m in ms])), rgba=rgba)
             self._pending += 1
         A = result.associations

@@ -20,9 +20,11 @@ OSPA_EVERY_NS = 1_000_000_000  # OSPA / GOSPA at most once per second of sensor 
 OSPA_MAX_POINTS = 300  # and for scenes of at most this many tracks and targets (the assignment is cubic)
 MAX_VIEWED = 6  # tracks with views of their own: the first confirmed ones
 TRUTH_KEPT = 100_000  # truth times kept for scoring (the oldest half dropped past this)
-# measurements in the position panels: the role's colour, translucent and small, so that the
-# estimate line (wider, opaque) stays readable where the points are drawn over it
-_MEAS_UNDER_LINE = (*colour("associated")[:3], 110)
+# measurements in the position panels: the role's colour, translucent and small. Rerun draws a
+# plot's points after all of its lines whatever the entity order (seen in screenshots, 0.41), so
+# the estimate line (wider, opaque) can only show through them: at alpha 255 they hid it; at 64
+# it shows, tinted orange where several points per pixel lie on it (a minute zoomed out)
+_MEAS_UNDER_LINE = (*colour("associated")[:3], 64)
 
 
 class Rows:
@@ -175,7 +177,7 @@ class Rows:
             meas = [k for k, e in enumerate(es) if e.meas_pos is not None]
             if meas:
                 sink.col(f"{base}/position/{ax}/measurement", "scalars", width=1, names=["associated measurement"],
-                         colors=[_MEAS_UNDER_LINE], points=True, marker_size=1.0).extend(
+                         colors=[_MEAS_UNDER_LINE], points=True, marker_size=0.75).extend(
                     t[meas], step[meas], arr[meas], v=[[float(es[k].meas_pos[a])] for k in meas])  # type: ignore[index]
         if mt.any():
             lo, hi = derive.chi2_bounds(len(self.ki))

@@ -145,3 +145,23 @@ def test_smoothed_series_sit_in_the_filtered_views(tmp_path: Path) -> None:
     for rows in err.values():
         a = np.array(rows)
         assert a.shape[1] == 3 and np.all(a[:, 1] > 0) and np.allclose(a[:, 2], -a[:, 1])
+
+
+def test_measurement_points_let_the_estimate_line_show(radar: Path) -> None:
+    """Rerun draws a plot's points over its lines: the measurement points must be translucent and
+    smaller than the estimate line is wide, or they hide it (docs: fusion.io.track_rows)."""
+    style: dict[str, dict[str, list]] = {}
+    for ch in RrdReader(str(radar)).stream():
+        if ch.is_static and "/position/" in ch.entity_path:
+            b = ch.to_record_batch()
+            style[ch.entity_path] = {n: b.column(n).to_pylist()[-1] for n in b.schema.names if ":" in n}
+    meas = [e for e in style if e.endswith("/measurement")]
+    assert meas, sorted(style)
+    for e in meas:
+        est = style[e.replace("/measurement", "/estimate")]
+        (rgba,) = style[e]["SeriesPoints:colors"]
+        (size,) = style[e]["SeriesPoints:marker_sizes"]
+        assert (rgba & 0xFF) <= 80, hex(rgba)  # alpha (colours are packed 0xRRGGBBAA)
+        assert est["SeriesLines:names"][0] == "estimate"
+        assert size < est["SeriesLines:widths"][0] / 2, (size, est)
+        assert (est["SeriesLines:colors"][0] & 0xFF) == 255
