@@ -163,12 +163,13 @@ class Rows:
         mt = c.matched[rows]
         for a, i in enumerate(self.pi):
             ax = self.axes[a]
-            sink.col(f"{base}/position/{ax}/estimate", "scalars", width=2, names=["estimate", "prediction"],
-                     colors=[colour("estimate"), colour("prediction")], widths=[2.5, 1.0]).extend(
-                t, step, arr, v=list(np.column_stack([c.X[rows, i], prior[:, i]])))
+            # the prediction first: a plot draws its series in order, the estimate goes on top
+            sink.col(f"{base}/position/{ax}/estimate", "scalars", width=2, names=["prediction", "estimate"],
+                     colors=[colour("prediction"), colour("estimate")], widths=[1.0, 2.5]).extend(
+                t, step, arr, v=list(np.column_stack([prior[:, i], c.X[rows, i]])))
             if mt.any():
-                sink.col(f"{base}/position/{ax}/truth", "scalars", width=1, names=["truth"],
-                         colors=[colour("truth")]).extend(t[mt], step[mt], arr[mt], v=list(c.TX[rows][mt][:, i:i + 1]))
+                sink.col(f"{base}/position/{ax}/truth", "scalars", width=1, names=["truth"],  # thin: drawn after
+                         colors=[colour("truth")], widths=[1.0]).extend(t[mt], step[mt], arr[mt], v=list(c.TX[rows][mt][:, i:i + 1]))
                 e_ = c.err[rows][mt][:, i]
                 s_ = 2.0 * c.std[rows][mt][:, i]
                 sink.col(f"{base}/error/{ax}", "scalars", width=3, names=["error", "+2 sigma", "-2 sigma"],

@@ -162,6 +162,6 @@ def test_measurement_points_let_the_estimate_line_show(radar: Path) -> None:
         (rgba,) = style[e]["SeriesPoints:colors"]
         (size,) = style[e]["SeriesPoints:marker_sizes"]
         assert (rgba & 0xFF) <= 80, hex(rgba)  # alpha (colours are packed 0xRRGGBBAA)
-        assert est["SeriesLines:names"][0] == "estimate"
-        assert size < est["SeriesLines:widths"][0] / 2, (size, est)
-        assert (est["SeriesLines:colors"][0] & 0xFF) == 255
+        assert est["SeriesLines:names"][-1] == "estimate", est  # drawn last among the lines: on top of them
+        assert size < est["SeriesLines:widths"][-1] / 2, (size, est)
+        assert (est["SeriesLines:colors"][-1] & 0xFF) == 255
