@@ -223,7 +223,10 @@ class Rows:
                 Pm = np.stack([es[k].prior_P for k in kg])  # type: ignore[misc]
                 Sg = np.stack([es[k].S for k in kg])  # type: ignore[misc]
                 K = np.swapaxes(np.linalg.solve(Sg, H @ Pm), 1, 2)  # P- H' S^-1, S symmetric
-                for group, cols, comp in gain_groups.split(sink.measured, sensor, m):  # one scale per unit
+                # one scale per unit; a sink without the description (bench/recording_cost.py loads
+                # main's sink beside this module) gets the unsplit gain
+                measured = getattr(sink, "measured", {})
+                for group, cols, comp in gain_groups.split(measured, sensor, m):
                     w = d * len(cols)
                     sink.col(f"{base}/gain/{group}/{sensor}", "scalars", width=w,
                              names=[f"K[{x},{c}]" for x in self.layout for c in comp],
