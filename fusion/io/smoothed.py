@@ -30,11 +30,11 @@ from fusion.smoothing import SmoothedTrack
 
 
 def _series(rec: Any, entity: str, names: Sequence[str], t_ns: Array, values: Array, epoch: bool,
-            colours: Sequence[tuple[int, int, int, int]] | None = None) -> None:
+            colours: Sequence[tuple[int, int, int, int]] | None = None, width: float = 2.0) -> None:
     import rerun as rr
 
     style = rr.SeriesLines(names=list(names)) if colours is None else \
-        rr.SeriesLines(names=list(names), colors=[list(c) for c in colours], widths=[2.0] * len(names))
+        rr.SeriesLines(names=list(names), colors=[list(c) for c in colours], widths=[width] * len(names))
     rec.log(entity, style, static=True)
     rec.send_columns(entity, indexes=[time_column(rr, "t", t_ns.tolist(), epoch=epoch)],
                      columns=rr.Scalars.columns(scalars=values.ravel()).partition([values.shape[1]] * len(values)))
@@ -75,7 +75,7 @@ def _beside_filtered(rec: Any, lab: str, t: SmoothedTrack, std: Array, ok: Array
     for i in pi:
         ax = layout[i]
         _series(rec, f"tracks/{lab}/position/{ax}/smoothed", ["smoothed"], t.t_ns, t.x_smooth[:, i:i + 1], epoch,
-                [colour("smoothed")])
+                [colour("smoothed")], width=1.5)  # drawn after the estimate (2.5 wide): both show
         rows += len(t.t_ns)
         if ok.any():
             e = t.x_smooth[ok, i] - t.truth[ok, i]
