@@ -22,6 +22,7 @@ from fusion import messages as m
 from fusion.config import ServiceConfig, load_service_config, mode_names
 from fusion.errors import ConfigError
 from fusion.io import wire
+from fusion.io.gain_groups import measured_components
 from fusion.io.rerun_sink import RerunSink
 from fusion.io.smoothed import log_smoothed
 from fusion.io.streamfile import read_records
@@ -73,7 +74,8 @@ def replay(stream: str | Path, *, config: str | Path | None = None, out: str | P
     if out is not None:
         sink = RerunSink(out, recording_id=Path(out).stem, layout=tracker.layout,
                          position_indices=tracker.position_indices, velocity_indices=tracker.velocity_indices,
-                         meta={"namespace": ns, "replay_of": str(stream), "modes": mode_names(cfg.tracker)},
+                         meta={"namespace": ns, "replay_of": str(stream), "modes": mode_names(cfg.tracker),
+                               "measured": measured_components(tracker.sensors, tracker.layout)},
                          counts=lambda: pipe.counts().flat())
     hist = Histories(sink) if smooth else None
     pipe = Pipeline(tracker, wire.Codec(ns), sink=hist if hist is not None else sink,
@@ -109,7 +111,8 @@ def replay(stream: str | Path, *, config: str | Path | None = None, out: str | P
             sm = smooth_tracks(hist, tracker)
             if sink is not None:
                 sink.flush()  # the recording's time kinds are settled by its first rows
-                log_smoothed(sink.rec, sm.tracks, tracker.layout, epoch=sink.epoch_time)
+                log_smoothed(sink.rec, sm.tracks, tracker.layout, epoch=sink.epoch_time,
+                             position_indices=tracker.position_indices)
                 for tid, why in sm.failed:
                     sink.log_text(tracker.now_ns or 0, f"track {tid} not smoothed: {why}", "WARN")
     finally:

@@ -37,6 +37,7 @@ from fusion.config import ServiceConfig, mode_names
 from fusion.fixed_lag import FixedLagSmoother, smoothed_key
 from fusion.io import wire
 from fusion.io.checkpointer import Checkpointer, counts_since, service_checkpoint_path
+from fusion.io.gain_groups import measured_components
 from fusion.io.intake_queue import IntakeLimits, IntakeQueue
 from fusion.io.recording import RotatingSink
 from fusion.io.recording_guard import GuardedSink
@@ -159,7 +160,8 @@ class Service:
             layout=self.tracker.layout, position_indices=self.tracker.position_indices,
             velocity_indices=self.tracker.velocity_indices, flush_interval_s=rc.flush_interval_s,
             meta={"namespace": self.ns, "sensors": sorted(self.tracker.sensors), "model": self.tracker.model_name,
-                  "modes": mode_names(self.config.tracker)},
+                  "modes": mode_names(self.config.tracker),
+                  "measured": measured_components(self.tracker.sensors, self.tracker.layout)},
             counts=self._counts_for_recording,
         )
         if recording_path is not None:

@@ -10,14 +10,19 @@ free 3-D view for 3-D data, a time series of position for 1-D data) over tabs wi
 the association outcomes, OSPA/GOSPA and the counts; right, one tab per viewed track with its
 time series: position per axis (estimate, prediction, truth, measurements), error per axis with
 its +-2 sigma band, NIS and NEES with their 95 % chi-square bounds, sqrt(diag P), the Kalman gain,
-the innovation with +-2 sqrt(diag S), IMM mode probabilities and the smoothed estimate when
-another module logs one under tracks/<label>/smoothed.
+the innovation with +-2 sqrt(diag S), IMM mode probabilities; the smoothed estimate, error and
+sigma of `fusion replay --smooth` (fusion.io.smoothed, logged after the last blueprint) appear in
+the position, error and sqrt(diag P) views, as entities inside their subtrees. The Kalman gain has
+one view per unit of the measured components (fusion.io.gain_groups): a radar's bearing gain
+(m/rad, ~range times its range gain) gets its own scale.
 """
 
 from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
 from typing import Any
+
+from fusion.io.gain_groups import GROUPS
 
 # (subtree under tracks/<label>, view title): the per-track views, in display order
 TRACK_VIEWS: tuple[tuple[str, str], ...] = (
@@ -26,11 +31,10 @@ TRACK_VIEWS: tuple[tuple[str, str], ...] = (
     ("nis", "NIS, 95 % bounds"),
     ("nees", "NEES, 95 % bounds"),
     ("std", "sqrt(diag P)"),
-    ("gain", "Kalman gain"),
+    *((f"gain/{entity}", title) for entity, title in GROUPS.values()),  # one scale per measured unit
     ("innovation", "innovation +-2 sqrt(diag S)"),
     ("mode", "IMM mode probabilities"),
-    ("smoothed", "smoothed"),
-)
+)  # the smoothed series (fusion.io.smoothed) sit inside the position, error and std subtrees
 
 
 def _has_data(origin: str, written: Iterable[str]) -> bool:
@@ -77,9 +81,11 @@ def build(*, ndim: int, axes: Sequence[str], viewed: Sequence[str], written: set
                                     look_target=(cx, cy, 0.0), eye_up=(0.0, 1.0, 0.0))
         cursor_only = [f"- /world/tracks/{lab}/{part}" for lab in viewed for part in ("cov", "now")]
         left.append(rrb.Spatial3DView(origin="world", contents=["$origin/**", *cursor_only],
-                                      name="trajectories up to the cursor", time_ranges=history, eye_controls=eye,
+                                      name="trajectories up to the cursor (faint: earlier 2-sigma ellipses)", time_ranges=history, eye_controls=eye,
                                       line_grid=rrb.LineGrid3D(visible=ndim == 3)))
-        left.append(rrb.Spatial3DView(origin="world", contents="$origin/**", name="at the cursor (2-sigma ellipses)",
+        trails = [f"- /world/tracks/{lab}/trail" for lab in viewed]  # earlier ellipses: the trajectory view's
+        left.append(rrb.Spatial3DView(origin="world", contents=["$origin/**", *trails],
+                                      name="at the cursor (2-sigma ellipses)",
                                       eye_controls=eye, line_grid=rrb.LineGrid3D(visible=ndim == 3)))
     tabs: list[Any] = [rrb.TextLogView(origin="events", name="events")]
     if _has_data("metrics", written):

@@ -12,6 +12,9 @@ ROLE_COLOURS: dict[str, tuple[int, int, int, int]] = {
     "prediction": (150, 190, 255, 255),  # light blue: the prior, before the update
     "tentative": (170, 170, 170, 120),  # faint grey: not yet confirmed
     "covariance": (30, 110, 255, 160),  # the estimate's 2-sigma ellipse
+    "trail": (30, 110, 255, 70),  # the faint 2-sigma ellipses of earlier steps
+    "smoothed": (0, 160, 150, 255),  # teal: the RTS smoother's estimate (fusion replay --smooth)
+    "smoothed_bound": (110, 200, 190, 255),  # its +-2 sigma band
     "bound": (90, 90, 90, 255),  # dark grey: +-2 sigma bands, chi-square bounds
     "nis": (150, 60, 200, 255),  # purple
     "nees": (220, 50, 50, 255),  # red

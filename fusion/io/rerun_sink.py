@@ -23,7 +23,8 @@ z = 0 plane; track labels are fusion.io.labels.short_id of the id):
   world/meas/<sensor>    measured points, coloured by their association outcome
   world/truth            true positions
   world/tracks/<label>/{now,cov,start,end}  a viewed track at the cursor: labelled point, 2-sigma
-                         ellipse (ellipsoid in 3-D), start and end markers
+                         ellipse (ellipsoid in 3-D), start and end markers; .../trail: earlier
+                         2-sigma ellipses, faint, spaced apart (fusion.io.trail)
   tracks/<label>/...     a viewed track's time series (see fusion.io.blueprint.TRACK_VIEWS)
   metrics/{ospa,gospa}   set distances to truth (fusion.io.derive), counts/<name>: the tracker's counters
   meta                   static JSON: layout, position/velocity indices, sensors, run_id (one per
@@ -102,6 +103,9 @@ class RerunSink:
         self.rec.log("meta", rr.TextDocument(json.dumps(info, sort_keys=True), media_type="text/plain"), static=True)
         # the names of an IMM's modes for their probability series (meta "modes"; else "mode j")
         self.mode_names: tuple[str, ...] = tuple(str(n) for n in (meta or {}).get("modes", ()))
+        # each sensor's measured components as (name, unit), to split the gain by unit (meta
+        # "measured", fusion.io.gain_groups.measured_components; else one unsplit gain view)
+        self.measured: dict[str, list[list[list[str]]]] = dict((meta or {}).get("measured", {}))
         self._send_blueprint()
 
     # ---- continuity across files -----------------------------------------------------------------
@@ -166,7 +170,7 @@ class RerunSink:
             used = np.array([(a := outcome.get((m.sensor_id, m.seq))) is not None and a.outcome in _USED for m in ms])
             rgba = np.where(used[:, None], _RGBA_USED, _RGBA_CLUTTER).astype(np.uint8)
             arr = t_ns if arrival_ns is None else arrival_ns
-            self.col(f"world/meas/{sensor_id}", "points", radius=-2.5).add(
+            self.col(f"world/meas/{sensor_id}", "points", radius=-1.75).add(
                 t_ns, step, arr, p=world(np.stack([m.position for m in ms])), rgba=rgba)
             self._pending += 1
         A = result.associations
@@ -262,7 +266,8 @@ class RerunSink:
         rr = self._rr
         kw = {"names": list(c.style["names"]), "colors": [list(x) for x in c.style["colors"]]}
         if c.style.get("points"):
-            self.rec.log(entity, rr.SeriesPoints(marker_sizes=[1.5] * len(kw["names"]), **kw), static=True)
+            size = float(c.style.get("marker_size", 1.5))
+            self.rec.log(entity, rr.SeriesPoints(marker_sizes=[size] * len(kw["names"]), **kw), static=True)
         else:
             self.rec.log(entity, rr.SeriesLines(widths=list(c.style.get("widths", [2.0] * len(kw["names"]))), **kw),
                          static=True)

@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 
 from fusion.core.checks import Array
-from fusion.io import derive
+from fusion.io import derive, gain_groups, trail
 from fusion.io.labels import short_id
 from fusion.io.palette import colour, series_colours
 from fusion.tracking.results import Estimate
@@ -20,6 +20,11 @@ OSPA_EVERY_NS = 1_000_000_000  # OSPA / GOSPA at most once per second of sensor 
 OSPA_MAX_POINTS = 300  # and for scenes of at most this many tracks and targets (the assignment is cubic)
 MAX_VIEWED = 6  # tracks with views of their own: the first confirmed ones
 TRUTH_KEPT = 100_000  # truth times kept for scoring (the oldest half dropped past this)
+# measurements in the position panels: the role's colour, translucent and small. Rerun draws a
+# plot's points after all of its lines whatever the entity order (seen in screenshots, 0.41), so
+# the estimate line (wider, opaque) can only show through them: at alpha 255 they hid it; at 64
+# it shows, tinted orange where several points per pixel lie on it (a minute zoomed out)
+_MEAS_UNDER_LINE = (*colour("associated")[:3], 64)
 
 
 class Rows:
@@ -33,6 +38,7 @@ class Rows:
         self.truth: dict[int, dict[str, Array]] = defaultdict(dict)
         self.viewed: dict[int, str] = {}  # track id -> label, in order of confirmation
         self._last: dict[int, tuple[int, int, int, Array]] = {}  # viewed track -> newest (t, step, arrival, world)
+        self._trail: dict[int, tuple[int, Array, float]] = {}  # viewed track -> last trail ellipse (fusion.io.trail)
         self._lo = np.full(3, np.inf)
         self._hi = np.full(3, -np.inf)
         self._next_ospa = -(2**62)
@@ -42,6 +48,7 @@ class Rows:
         self.truth.update(other.truth)
         self.viewed = dict(other.viewed)
         self._last = dict(other._last)
+        self._trail = dict(other._trail)
         self._lo, self._hi, self._next_ospa = other._lo.copy(), other._hi.copy(), other._next_ospa
         self.newest_truth_ns = other.newest_truth_ns
 
@@ -156,12 +163,13 @@ class Rows:
         mt = c.matched[rows]
         for a, i in enumerate(self.pi):
             ax = self.axes[a]
-            sink.col(f"{base}/position/{ax}/estimate", "scalars", width=2, names=["estimate", "prediction"],
-                     colors=[colour("estimate"), colour("prediction")]).extend(
-                t, step, arr, v=list(np.column_stack([c.X[rows, i], prior[:, i]])))
+            # the prediction first: a plot draws its series in order, the estimate goes on top
+            sink.col(f"{base}/position/{ax}/estimate", "scalars", width=2, names=["prediction", "estimate"],
+                     colors=[colour("prediction"), colour("estimate")], widths=[1.0, 2.5]).extend(
+                t, step, arr, v=list(np.column_stack([prior[:, i], c.X[rows, i]])))
             if mt.any():
-                sink.col(f"{base}/position/{ax}/truth", "scalars", width=1, names=["truth"],
-                         colors=[colour("truth")]).extend(t[mt], step[mt], arr[mt], v=list(c.TX[rows][mt][:, i:i + 1]))
+                sink.col(f"{base}/position/{ax}/truth", "scalars", width=1, names=["truth"],  # thin: drawn after
+                         colors=[colour("truth")], widths=[1.0]).extend(t[mt], step[mt], arr[mt], v=list(c.TX[rows][mt][:, i:i + 1]))
                 e_ = c.err[rows][mt][:, i]
                 s_ = 2.0 * c.std[rows][mt][:, i]
                 sink.col(f"{base}/error/{ax}", "scalars", width=3, names=["error", "+2 sigma", "-2 sigma"],
@@ -170,7 +178,7 @@ class Rows:
             meas = [k for k, e in enumerate(es) if e.meas_pos is not None]
             if meas:
                 sink.col(f"{base}/position/{ax}/measurement", "scalars", width=1, names=["associated measurement"],
-                         colors=[colour("associated")], points=True).extend(
+                         colors=[_MEAS_UNDER_LINE], points=True, marker_size=0.75).extend(
                     t[meas], step[meas], arr[meas], v=[[float(es[k].meas_pos[a])] for k in meas])  # type: ignore[index]
         if mt.any():
             lo, hi = derive.chi2_bounds(len(self.ki))
@@ -215,9 +223,15 @@ class Rows:
                 Pm = np.stack([es[k].prior_P for k in kg])  # type: ignore[misc]
                 Sg = np.stack([es[k].S for k in kg])  # type: ignore[misc]
                 K = np.swapaxes(np.linalg.solve(Sg, H @ Pm), 1, 2)  # P- H' S^-1, S symmetric
-                sink.col(f"{base}/gain/{sensor}", "scalars", width=d * m,
-                         names=[f"K[{x},{j}]" for x in self.layout for j in range(m)],
-                         colors=series_colours(d * m)).extend(t[gs], step[gs], arr[gs], v=list(K.reshape(len(kg), -1)))
+                # one scale per unit; a sink without the description (bench/recording_cost.py loads
+                # main's sink beside this module) gets the unsplit gain
+                measured = getattr(sink, "measured", {})
+                for group, cols, comp in gain_groups.split(measured, sensor, m):
+                    w = d * len(cols)
+                    sink.col(f"{base}/gain/{group}/{sensor}", "scalars", width=w,
+                             names=[f"K[{x},{c}]" for x in self.layout for c in comp],
+                             colors=series_colours(w)).extend(t[gs], step[gs], arr[gs],
+                                                              v=list(K[:, :, cols].reshape(len(kg), -1)))
         mk = [k for k, e in enumerate(es) if e.mode_probabilities is not None]
         if mk:
             mu = np.stack([es[k].mode_probabilities for k in mk])  # type: ignore[misc]
@@ -226,7 +240,8 @@ class Rows:
                      colors=series_colours(mu.shape[1])).extend(t[sel], step[sel], arr[sel], v=list(mu))
 
     def _cursor(self, sink: Any, tid: int, lab: str, rows: Array, es: list[Estimate], c: _Stacked) -> None:
-        """Labelled point and 2-sigma ellipse at the cursor; a start marker at the first row."""
+        """Labelled point and 2-sigma ellipse at the cursor, the faint trail of earlier ellipses
+        (fusion.io.trail picks them); a start marker at the first row."""
         t, step, arr = c.t[rows], c.step[rows], c.arr[rows]
         W = c.W[rows]
         w = f"world/tracks/{lab}"
@@ -238,13 +253,23 @@ class Rows:
             t, step, arr, p=list(W[:, None, :]), label=[[lab]] * len(rows))
         Pp = c.P[rows][:, self.pi][:, :, self.pi]
         pos = c.X[rows][:, self.pi]
+        keep: list[int] = []
+        if len(self.pi) > 1:
+            keep, self._trail[tid] = trail.pick(t, pos, trail.radii(Pp), self._trail.get(tid))
+        k = np.array(keep, dtype=np.int64)
         if len(self.pi) == 3:
             half, quat = derive.ellipsoid_axes(Pp)
             sink.col(f"{w}/cov", "ellipsoids", rgba=colour("covariance")).extend(
                 t, step, arr, c=list(pos), h=list(half), q=list(quat))
+            if keep:
+                sink.col(f"{w}/trail", "ellipsoids", rgba=colour("trail"), radius=-0.5).extend(
+                    t[k], step[k], arr[k], c=list(pos[k]), h=list(half[k]), q=list(quat[k]))
             return
         if len(self.pi) == 2:
             strips = derive.world(derive.ellipse_points(pos, Pp))
+            if keep:
+                sink.col(f"{w}/trail", "strips", rgba=colour("trail"), radius=-0.5).extend(
+                    t[k], step[k], arr[k], s=list(strips[k]))
         else:
             half = 2.0 * np.sqrt(Pp[:, 0, 0])
             strips = derive.world(np.stack([pos - half[:, None], pos + half[:, None]], axis=1))

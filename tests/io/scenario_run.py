@@ -56,6 +56,7 @@ def record_scenario(name: str, path, *, duration_s: float | None = None, sink_fa
     import msgspec
 
     from fusion.io import wire
+    from fusion.io.gain_groups import measured_components
     from fusion.io.rerun_sink import RerunSink
     from fusion.pipeline import Pipeline
     from publishers.spec import load_scenario_file, scenario_path
@@ -67,7 +68,8 @@ def record_scenario(name: str, path, *, duration_s: float | None = None, sink_fa
     tracker = Tracker(sf.service.tracker)
     pipe: Pipeline | None = None
     sink = RerunSink(path, recording_id=name, layout=tracker.layout, position_indices=tracker.position_indices,
-                     velocity_indices=tracker.velocity_indices, meta={"scenario": name},
+                     velocity_indices=tracker.velocity_indices,
+                     meta={"scenario": name, "measured": measured_components(tracker.sensors, tracker.layout)},
                      counts=lambda: pipe.counts().flat())  # type: ignore[union-attr]
     pipe = Pipeline(tracker, wire.Codec(sf.service.namespace), sink=sink)
     records = [(s.arrival_ns, s.key, s.payload) for s in samples]
@@ -109,3 +111,21 @@ def record_maneuver(path, *, seed: int = 3, batch: int = 1, sink=None) -> tuple[
     finally:
         out.close()
     return results, truth
+
+
+def write_scenario_stream(name: str, path, *, duration_s: float | None = None):
+    """The samples of the reference scenario `name` as a .fstream (what `fusion demo` records
+    beside its .rrd), for `fusion replay`; returns `path`."""
+    import msgspec
+
+    from fusion.io.streamfile import StreamWriter
+    from publishers.spec import load_scenario_file, scenario_path
+    from publishers.stream import build_stream
+
+    sf = load_scenario_file(scenario_path(name))
+    spec = sf.scenario if duration_s is None else msgspec.structs.replace(sf.scenario, duration_s=duration_s)
+    samples, _ = build_stream(spec, namespace=sf.service.namespace)
+    with StreamWriter(path, namespace=sf.service.namespace) as w:
+        for s in samples:
+            w.write(s.arrival_ns, s.key, s.payload)
+    return path

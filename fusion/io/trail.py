@@ -1,0 +1,41 @@
+"""Which steps of a viewed track get a faint 2-sigma ellipse in the trajectory view's trail.
+
+One ellipse per step would overlap into a "rope" (the ellipse is often wider than one step's
+travel). So a step is drawn only when it is newer than the last drawn one and its ellipse cannot
+overlap it: with r the 2-sigma radius of the largest axis (2 sqrt(lambda_max(P_pos))), a step at
+p with radius r follows the last drawn (p0, r0) when
+
+    |p - p0| >= SPACING (r0 + r)
+
+(bounding circles, or spheres, apart by a gap). A stationary or slow track gets few ellipses, a
+fast and certain one many; a track converging after birth shows its shrinking ellipses apart.
+The choice is made in the order rows reach the sink, per track, in sensor time: rows older than
+the last drawn one (revisions after late data) are not drawn again.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from fusion.core.checks import Array
+
+SPACING = 1.25  # gap between neighbouring trail ellipses, as a multiple of the sum of their radii
+
+
+def radii(P: Array) -> Array:
+    """2-sigma radius of the largest axis of each position covariance (n, k, k) -> (n,)."""
+    w = np.linalg.eigvalsh(0.5 * (P + np.swapaxes(P, -1, -2)))
+    return 2.0 * np.sqrt(np.clip(w[:, -1], 0.0, None))
+
+
+def pick(t_ns: Array, pos: Array, r: Array, last: tuple[int, Array, float] | None
+         ) -> tuple[list[int], tuple[int, Array, float] | None]:
+    """Rows (in the given order) to draw, and the new last drawn (t_ns, position, radius).
+    t_ns (n,), pos (n, k), r (n,): one track's rows; `last`: what was drawn before (or None)."""
+    out: list[int] = []
+    for i in range(len(t_ns)):
+        ti = int(t_ns[i])
+        if last is None or (ti > last[0] and float(np.linalg.norm(pos[i] - last[1])) >= SPACING * (last[2] + r[i])):
+            out.append(i)
+            last = (ti, pos[i].copy(), float(r[i]))
+    return out, last
