@@ -12,10 +12,12 @@ target per second, as msgpack Measurements) plus every target's truth at every r
 every estimate is scored: error, NEES, OSPA/GOSPA), one `Pipeline.ingest` per scan (a service
 keeping up in real time: the most steps, so the most per-step cost, per measurement).
 Baseline: the same pipeline with the recording off, interleaved with it in every repeat.
-Reported, per measurement: the cost = (with - without) / measurements (it includes the work of
-Rerun's own threads, which share the 2 cores, and the machine's noise), and the time inside
-the sink's calls (log_truth, log_step, maybe_flush); the final flush and close, a cost per file,
-apart in ms. Median [min, max] over the repeats.
+Reported, per measurement: the cost = (with - without) / measurements, in wall time (the
+machine's load makes it noisy) and in CPU time of the whole process (time.process_time: every
+thread, Rerun's encoding and writing threads too, which share the 2 cores; other processes do not
+count); and the CPU time inside the sink's calls (log_truth, log_step, maybe_flush; thread
+time). The final flush and close, a cost per file, apart in ms (wall). Median [min, max] over the
+repeats.
 """
 
 from __future__ import annotations
@@ -65,36 +67,38 @@ def batches(n_targets: int, seconds: float, *, ns: str, seed: int = 1) -> list[l
 
 
 class _Timed:
-    """The pipeline's sink, timing the calls it passes on."""
+    """The pipeline's sink, timing the calls it passes on (CPU time of the calling thread: the
+    machine's other load does not count)."""
 
     def __init__(self, sink: Any) -> None:
         self.sink = sink
         self.inside_s = 0.0
 
     def log_step(self, result: Any, *, arrival_ns: int | None = None) -> None:
-        a = time.perf_counter()
+        a = time.thread_time()
         self.sink.log_step(result, arrival_ns=arrival_ns)
-        self.inside_s += time.perf_counter() - a
+        self.inside_s += time.thread_time() - a
 
     def log_truth(self, target_id: str, t_ns: int, state: Any) -> None:
-        a = time.perf_counter()
+        a = time.thread_time()
         self.sink.log_truth(target_id, t_ns, state)
-        self.inside_s += time.perf_counter() - a
+        self.inside_s += time.thread_time() - a
 
     def log_text(self, t_ns: int, text: str, level: str = "INFO") -> None:
-        a = time.perf_counter()
+        a = time.thread_time()
         self.sink.log_text(t_ns, text, level)
-        self.inside_s += time.perf_counter() - a
+        self.inside_s += time.thread_time() - a
 
     def maybe_flush(self) -> None:
-        a = time.perf_counter()
+        a = time.thread_time()
         self.sink.maybe_flush()
-        self.inside_s += time.perf_counter() - a
+        self.inside_s += time.thread_time() - a
 
 
-def _run(data: list, *, record: bool, tmp: Path) -> tuple[float, float, float, int]:
-    """(seconds of processing with the recording's cadence, seconds inside the sink's calls,
-    seconds of the final flush and close, measurements applied)."""
+def _run(data: list, *, record: bool, tmp: Path) -> tuple[float, float, float, float, int]:
+    """(wall seconds of processing with the recording's cadence, CPU seconds of the process (all
+    its threads: Rerun's too) over the same, CPU seconds inside the sink's calls, wall seconds of
+    the final flush and close, measurements applied)."""
     cfg = load_service_config(CONFIG)
     tr = Tracker(cfg.tracker)
     pipe = Pipeline(tr, wire.Codec(cfg.namespace))
@@ -107,17 +111,17 @@ def _run(data: list, *, record: bool, tmp: Path) -> tuple[float, float, float, i
                   "modes": mode_names(cfg.tracker)})
         timed = _Timed(GuardedSink(rotating))
         pipe.sink = timed
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     for recs in data:
         pipe.ingest(recs)
         if timed is not None:
             timed.maybe_flush()
-    steady = time.perf_counter() - t0
+    steady, cpu = time.perf_counter() - t0, time.process_time() - c0
     if rotating is not None:
         rotating.close()
         assert timed is not None and timed.sink.error is None, timed.sink.error  # type: ignore[union-attr]
     closing = time.perf_counter() - t0 - steady
-    return steady, 0.0 if timed is None else timed.inside_s, closing, tr.counts.applied
+    return steady, cpu, 0.0 if timed is None else timed.inside_s, closing, tr.counts.applied
 
 
 SECONDS = {10: 60.0, 100: 12.0, 1000: 2.0}  # of sensor time: 9k, 18k, 30k measurements
@@ -132,36 +136,34 @@ def run(*, quick: bool = False, sizes: tuple[int, ...] = (10, 100, 1000)) -> dic
     print("recording cost per measurement, shipped configuration (configs/service.toml: IMM, radar1 + cam1, "
           f"the service's rotating recording), truth of every target at every radar scan; median [min, max] of "
           f"{repeats} interleaved repeats")
-    print(f"{'targets':>7} {'meas':>6} {'off us/meas':>12} {'on us/meas':>11} {'cost us/meas':>22} "
-          f"{'in sink us/meas':>22} {'close ms':>9}")
+    print(f"{'targets':>7} {'meas':>6} {'off us/meas':>12} {'on us/meas':>11} {'cost (wall) us/meas':>22} "
+          f"{'cost (CPU) us/meas':>22} {'in sink (CPU) us/meas':>22} {'close ms':>9}")
+    with tempfile.TemporaryDirectory() as d:  # compiled kernels, imports, Rerun: loaded before any timing
+        _run(batches(20, 2.0, ns=ns), record=True, tmp=Path(d))
     for n_targets in sizes:
         data = batches(n_targets, (QUICK_SECONDS if quick else SECONDS)[n_targets], ns=ns)
-        off: list[float] = []
-        on: list[float] = []
-        inside: list[float] = []
-        closing: list[float] = []
-        n = 0
+        runs: dict[bool, list[tuple[float, float, float, float, int]]] = {False: [], True: []}
         with tempfile.TemporaryDirectory() as d:
             for k in range(repeats):
-                s0, _, _, n = _run(data, record=False, tmp=Path(d))
-                s1, i1, c1, n1 = _run(data, record=True, tmp=Path(d) / f"r{k}")
-                assert n1 == n, (n1, n)
-                off.append(s0)
-                on.append(s1)
-                inside.append(i1)
-                closing.append(c1)
+                for record in (False, True):
+                    runs[record].append(_run(data, record=record, tmp=Path(d) / f"r{k}"))
+        n = runs[False][0][4]
+        assert all(r[4] == n for r in runs[True] + runs[False]), "the runs applied different measurements"
         us = 1e6 / n
-        cost = [(b - a) * us for a, b in zip(off, on, strict=True)]
-        ins = [x * us for x in inside]
+        wall = [(on[0] - off[0]) * us for off, on in zip(runs[False], runs[True], strict=True)]
+        cpu = [(on[1] - off[1]) * us for off, on in zip(runs[False], runs[True], strict=True)]
+        ins = [on[2] * us for on in runs[True]]
 
         def spread(v: list[float]) -> str:
             return f"{statistics.median(v):8.1f} [{min(v):.1f}, {max(v):.1f}]"
 
-        print(f"{n_targets:>7} {n:>6} {statistics.median(off) * us:12.1f} {statistics.median(on) * us:11.1f} "
-              f"{spread(cost):>22} {spread(ins):>22} {statistics.median(closing) * 1e3:9.0f}")
-        out[f"recording_{n_targets}_cost_us_per_meas"] = statistics.median(cost)
-        out[f"recording_{n_targets}_in_sink_us_per_meas"] = statistics.median(ins)
-        out[f"recording_{n_targets}_off_us_per_meas"] = statistics.median(off) * us
+        print(f"{n_targets:>7} {n:>6} {statistics.median(r[0] for r in runs[False]) * us:12.1f} "
+              f"{statistics.median(r[0] for r in runs[True]) * us:11.1f} {spread(wall):>22} {spread(cpu):>22} "
+              f"{spread(ins):>22} {statistics.median(r[3] for r in runs[True]) * 1e3:9.0f}")
+        out[f"recording_{n_targets}_cost_wall_us_per_meas"] = statistics.median(wall)
+        out[f"recording_{n_targets}_cost_cpu_us_per_meas"] = statistics.median(cpu)
+        out[f"recording_{n_targets}_in_sink_cpu_us_per_meas"] = statistics.median(ins)
+        out[f"recording_{n_targets}_off_us_per_meas"] = statistics.median(r[0] for r in runs[False]) * us
     return out
 
 

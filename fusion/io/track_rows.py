@@ -1,7 +1,9 @@
 """The rows a flush derives from the kept estimates (see fusion.io.rerun_sink for the layout and
-fusion.io.derive for the math): the all-track data of record, the trails, and the time series of
-the viewed tracks. Stacked numpy over all estimates of a flush; the per-track work is bounded by
-the number of viewed tracks (MAX_VIEWED)."""
+fusion.io.derive for the math): `score`, at every record flush, the all-track data of record;
+`views`, at every view flush, the trails and the time series of the viewed tracks from the
+stacked estimates of the record flushes since the last one. Stacked numpy over all estimates of a
+flush; the per-track work is bounded by the number of viewed tracks (MAX_VIEWED) and done once
+per view flush, however many record flushes came before it."""
 
 from __future__ import annotations
 
@@ -65,18 +67,26 @@ class Rows:
         return s
 
     # ---- one flush -------------------------------------------------------------------------------
-    def derive(self, est: list[tuple[Estimate, int, int]], sink: Any) -> None:
+    def score(self, est: list[tuple[Estimate, int, int]], sink: Any) -> _Stacked | None:
+        """The record/estimates rows of a record flush's estimates, scored against the truth at
+        their times (retractions as NaN rows); the live ones stacked for `views` (None if none).
+        Also picks the viewed tracks (the first MAX_VIEWED confirmed ones, in row order) and
+        widens the scene's extent."""
         retracted = [r for r in est if r[0].status == "retracted"]
         live = [r for r in est if r[0].status != "retracted"]
         rec = sink.col("record/estimates", "record")
         d = len(self.layout)
-        for e, arr, step in retracted:  # x, std, error: NaN rows
-            nan = np.full((1, d), np.nan)
-            rec.extend([e.t_ns], [step], [arr], blocks={"x": nan, "std": nan, "error": nan}, track=[e.track_id],
-                       label=[short_id(e.track_id)], sensor=[e.sensor_id], seq=[e.seq], status=[e.status],
-                       revision=[e.revision], nis=[np.nan], nis_dof=[0], nees=[np.nan], nees_dof=[0], target=[""])
+        if retracted:  # x, std, error: NaN rows
+            E_r = [r[0] for r in retracted]
+            nan = np.full((len(E_r), d), np.nan)
+            ids_r = [e.track_id for e in E_r]
+            rec.extend([e.t_ns for e in E_r], [r[2] for r in retracted], [r[1] for r in retracted],
+                       blocks={"x": nan, "std": nan, "error": nan}, track=ids_r, label=[short_id(i) for i in ids_r],
+                       sensor=[e.sensor_id for e in E_r], seq=[e.seq for e in E_r], status=[e.status for e in E_r],
+                       revision=[e.revision for e in E_r], nis=[np.nan] * len(E_r), nis_dof=[0] * len(E_r),
+                       nees=[np.nan] * len(E_r), nees_dof=[0] * len(E_r), target=[""] * len(E_r))
         if not live:
-            return
+            return None
         E_ = [r[0] for r in live]
         t = np.array([e.t_ns for e in E_], dtype=np.int64)
         arr = np.array([r[1] for r in live], dtype=np.int64)
@@ -96,21 +106,16 @@ class Rows:
             target[i] = name
         matched = np.zeros(n, dtype=bool)
         matched[m_idx] = True
-        nis = np.array([np.nan if e.nis is None else e.nis for e in E_])
+        nis = np.array([np.nan if e.nis is None else e.nis for e in E_], dtype=np.float64)
         nis_dof = np.array([0 if e.y is None else e.y.shape[0] for e in E_], dtype=np.int64)
         ids = [e.track_id for e in E_]
         status = [e.status for e in E_]
         rec.extend(t, step, arr, track=ids, label=[short_id(i) for i in ids], sensor=[e.sensor_id for e in E_],
                    seq=[e.seq for e in E_], status=status, revision=[e.revision for e in E_],
-                   blocks={"x": X, "std": std, "error": err}, nis=nis.tolist(), nis_dof=nis_dof.tolist(),
-                   nees=nees.tolist(), nees_dof=np.where(matched, len(self.ki), 0).tolist(), target=target)
+                   blocks={"x": X, "std": std, "error": err}, nis=nis, nis_dof=nis_dof,
+                   nees=nees, nees_dof=np.where(matched, len(self.ki), 0), target=target)
         W = derive.world(X[:, self.pi])
-        conf = np.array([s == "confirmed" for s in status])
-        for mask, entity, role, radius in ((conf, "world/estimates", "estimate", -2.0),
-                                           (~conf, "world/tentative", "tentative", -1.5)):
-            if mask.any():
-                sink.col(entity, "points", rgba=colour(role), radius=radius).extend(
-                    t[mask], step[mask], arr[mask], p=list(W[mask][:, None, :]))
+        conf = np.array([s == "confirmed" for s in status], dtype=bool)
         if conf.any():
             self._lo = np.minimum(self._lo, W[conf].min(axis=0))
             self._hi = np.maximum(self._hi, W[conf].max(axis=0))
@@ -119,14 +124,31 @@ class Rows:
                 break
             if ids[i] not in self.viewed:
                 self.viewed[ids[i]] = short_id(ids[i])
+        return _Stacked(t, step, arr, X, P, std, err, matched, nees, TX_full(TX, m_idx, X.shape), W,
+                        E=E_, ids=ids, conf=conf)
+
+    def views(self, batches: list[_Stacked], sink: Any) -> None:
+        """The rows a reviewer looks at, from the stacked estimates of the record flushes since the
+        last view flush (in their order): trails, OSPA/GOSPA (per record flush, as scored), and
+        the viewed tracks' time series and cursor marks."""
+        if not batches:
+            return
+        for b in batches:
+            self._set_distances(sink, b.t, b.step, b.arr, b.W, b.conf, b.ids)
+        c = batches[0] if len(batches) == 1 else _Stacked.concat(batches)
+        for mask, entity, role, radius in ((c.conf, "world/estimates", "estimate", -2.0),
+                                           (~c.conf, "world/tentative", "tentative", -1.5)):
+            if mask.any():
+                sink.col(entity, "points", rgba=colour(role), radius=radius).extend(
+                    c.t[mask], c.step[mask], c.arr[mask], p=c.W[mask][:, None, :])
         rows_of: dict[int, list[int]] = defaultdict(list)
-        for i, tid in enumerate(ids):  # a viewed track's confirmed rows (a flush's cut must not matter)
-            if tid in self.viewed and conf[i]:
+        viewed, conf = self.viewed, c.conf
+        for i, tid in enumerate(c.ids):  # a viewed track's confirmed rows (a flush's cut must not matter)
+            if tid in viewed and conf[i]:
                 rows_of[tid].append(i)
-        cols = _Stacked(t, step, arr, X, P, std, err, matched, nees, TX_full(TX, m_idx, X.shape), W)
+        E_ = c.E
         for tid in sorted(rows_of, key=list(self.viewed).index):
-            self._track(sink, tid, np.array(rows_of[tid]), [E_[i] for i in rows_of[tid]], cols)
-        self._set_distances(sink, t, step, arr, W, conf, ids)
+            self._track(sink, tid, np.array(rows_of[tid]), [E_[i] for i in rows_of[tid]], c)
 
     def _set_distances(self, sink: Any, t: Array, step: Array, arr: Array, W: Array, conf: Array,
                        ids: list[int]) -> None:
@@ -259,14 +281,24 @@ class Rows:
 
 
 class _Stacked:
-    """The stacked arrays of one flush's live estimates."""
+    """The stacked arrays of the live estimates of one record flush (or of several, concatenated),
+    with the estimates themselves (E), their track ids and whether each is confirmed."""
 
-    __slots__ = ("P", "TX", "W", "X", "arr", "err", "matched", "nees", "std", "step", "t")
+    __slots__ = ("E", "P", "TX", "W", "X", "arr", "conf", "err", "ids", "matched", "nees", "std", "step", "t")
 
     def __init__(self, t: Array, step: Array, arr: Array, X: Array, P: Array, std: Array, err: Array,
-                 matched: Array, nees: Array, TX: Array, W: Array) -> None:
+                 matched: Array, nees: Array, TX: Array, W: Array, *, E: list[Estimate], ids: list[int],
+                 conf: Array) -> None:
         self.t, self.step, self.arr, self.X, self.P, self.std = t, step, arr, X, P, std
         self.err, self.matched, self.nees, self.TX, self.W = err, matched, nees, TX, W
+        self.E, self.ids, self.conf = E, ids, conf
+
+    @classmethod
+    def concat(cls, parts: list[_Stacked]) -> _Stacked:
+        arrays = [np.concatenate([getattr(p, f) for p in parts]) for f in
+                  ("t", "step", "arr", "X", "P", "std", "err", "matched", "nees", "TX", "W")]
+        return cls(*arrays, E=[e for p in parts for e in p.E], ids=[i for p in parts for i in p.ids],
+                   conf=np.concatenate([p.conf for p in parts]))
 
 
 def TX_full(TX: Array, idx: Array, shape: tuple[int, ...]) -> Array:
