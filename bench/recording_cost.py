@@ -16,8 +16,10 @@ Reported, per measurement: the cost = (with - without) / measurements, in wall t
 machine's load makes it noisy) and in CPU time of the whole process (time.process_time: every
 thread, Rerun's encoding and writing threads too, which share the 2 cores; other processes do not
 count); and the CPU time inside the sink's calls (log_truth, log_step, maybe_flush; thread
-time). The final flush and close, a cost per file, apart in ms (wall). Median [min, max] over the
-repeats.
+time). Steady state: over the scans after the first WARM_S wall seconds of the recording-on run
+(the same scans in the run without); a file's start (the sink's CPU time in those first seconds:
+the first view flush, the series' styles, the blueprint) and its final flush and close, costs per
+file (a file lasts up to an hour), apart in ms. Median [min, max] over the repeats.
 """
 
 from __future__ import annotations
@@ -28,6 +30,8 @@ import tempfile
 import time
 from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 from bench.e2e_load import SENSORS, Scene
 from fusion import messages as m
@@ -95,10 +99,9 @@ class _Timed:
         self.inside_s += time.thread_time() - a
 
 
-def _run(data: list, *, record: bool, tmp: Path) -> tuple[float, float, float, float, int]:
-    """(wall seconds of processing with the recording's cadence, CPU seconds of the process (all
-    its threads: Rerun's too) over the same, CPU seconds inside the sink's calls, wall seconds of
-    the final flush and close, measurements applied)."""
+def _run(data: list, *, record: bool, tmp: Path) -> tuple[Any, int]:
+    """Cumulative (wall s, process CPU s, CPU s inside the sink) after each scan, (n_scans + 1, 3),
+    and the measurements applied; a recording's final flush and close as one more row."""
     cfg = load_service_config(CONFIG)
     tr = Tracker(cfg.tracker)
     pipe = Pipeline(tr, wire.Codec(cfg.namespace))
@@ -111,21 +114,25 @@ def _run(data: list, *, record: bool, tmp: Path) -> tuple[float, float, float, f
                   "modes": mode_names(cfg.tracker)})
         timed = _Timed(GuardedSink(rotating))
         pipe.sink = timed
+    marks = np.zeros((len(data) + 2, 3))
     t0, c0 = time.perf_counter(), time.process_time()
-    for recs in data:
+    for k, recs in enumerate(data):
         pipe.ingest(recs)
         if timed is not None:
             timed.maybe_flush()
-    steady, cpu = time.perf_counter() - t0, time.process_time() - c0
+        marks[k + 1] = (time.perf_counter() - t0, time.process_time() - c0, 0.0 if timed is None else timed.inside_s)
+    marks[-1] = marks[-2]
     if rotating is not None:
         rotating.close()
         assert timed is not None and timed.sink.error is None, timed.sink.error  # type: ignore[union-attr]
-    closing = time.perf_counter() - t0 - steady
-    return steady, cpu, 0.0 if timed is None else timed.inside_s, closing, tr.counts.applied
+        marks[-1, 0] = time.perf_counter() - t0
+    return marks, tr.counts.applied
 
 
-SECONDS = {10: 60.0, 100: 12.0, 1000: 2.0}  # of sensor time: 9k, 18k, 30k measurements
-QUICK_SECONDS = {10: 20.0, 100: 4.0, 1000: 1.0}
+WARM_S = 7.0  # wall seconds of a recording's start left out: the first view flush (5 s), styles, blueprint
+STEADY_S = 10.0  # wall seconds of steady state measured after them (at least)
+RATE = {10: 1800.0, 100: 5000.0, 1000: 5000.0}  # measurements per wall second the tracker handles here, about
+PER_S = 15  # measurements per target per second of sensor time (bench.e2e_load)
 
 
 def run(*, quick: bool = False, sizes: tuple[int, ...] = (10, 100, 1000)) -> dict[str, float]:
@@ -137,33 +144,46 @@ def run(*, quick: bool = False, sizes: tuple[int, ...] = (10, 100, 1000)) -> dic
           f"the service's rotating recording), truth of every target at every radar scan; median [min, max] of "
           f"{repeats} interleaved repeats")
     print(f"{'targets':>7} {'meas':>6} {'off us/meas':>12} {'on us/meas':>11} {'cost (wall) us/meas':>22} "
-          f"{'cost (CPU) us/meas':>22} {'in sink (CPU) us/meas':>22} {'close ms':>9}")
+          f"{'cost (CPU) us/meas':>22} {'in sink (CPU) us/meas':>22} {'close ms':>9} {'start ms':>9}")
     with tempfile.TemporaryDirectory() as d:  # compiled kernels, imports, Rerun: loaded before any timing
         _run(batches(20, 2.0, ns=ns), record=True, tmp=Path(d))
     for n_targets in sizes:
-        data = batches(n_targets, (QUICK_SECONDS if quick else SECONDS)[n_targets], ns=ns)
-        runs: dict[bool, list[tuple[float, float, float, float, int]]] = {False: [], True: []}
+        wall_s = (WARM_S + STEADY_S) * (0.5 if quick else 1.0) + 3.0
+        data = batches(n_targets, wall_s * RATE[n_targets] / (PER_S * n_targets), ns=ns)
+        runs: dict[bool, list[tuple[Any, int]]] = {False: [], True: []}
         with tempfile.TemporaryDirectory() as d:
             for k in range(repeats):
                 for record in (False, True):
                     runs[record].append(_run(data, record=record, tmp=Path(d) / f"r{k}"))
-        n = runs[False][0][4]
-        assert all(r[4] == n for r in runs[True] + runs[False]), "the runs applied different measurements"
-        us = 1e6 / n
-        wall = [(on[0] - off[0]) * us for off, on in zip(runs[False], runs[True], strict=True)]
-        cpu = [(on[1] - off[1]) * us for off, on in zip(runs[False], runs[True], strict=True)]
-        ins = [on[2] * us for on in runs[True]]
+        meas = np.cumsum([0] + [sum(1 for _, key, _ in recs if "/truth/" not in key) for recs in data])
+        wall, cpu, ins, off_us, on_us, n_steady = [], [], [], [], [], []
+        for (off, n_off), (on, n_on) in zip(runs[False], runs[True], strict=True):
+            assert n_off == n_on == meas[-1], (n_off, n_on, meas[-1])  # every measurement applied, both ways
+            k0 = int(np.searchsorted(on[:-1, 0], WARM_S * (0.5 if quick else 1.0)))  # the first scan after the warm-up
+            k1 = len(data)
+            if k0 >= k1 - 1:
+                raise RuntimeError(f"{n_targets} targets: the run ended within its warm-up; raise RATE")
+            n = meas[k1] - meas[k0]
+            d_off, d_on = off[k1] - off[k0], on[k1] - on[k0]
+            wall.append((d_on[0] - d_off[0]) / n * 1e6)
+            cpu.append((d_on[1] - d_off[1]) / n * 1e6)
+            ins.append(d_on[2] / n * 1e6)
+            off_us.append(d_off[0] / n * 1e6)
+            on_us.append(d_on[0] / n * 1e6)
+            n_steady.append(int(n))
+        closing = [(on[-1, 0] - on[-2, 0]) * 1e3 for on, _ in runs[True]]
+        warm = [(on[k0, 2]) * 1e3 for on, _ in runs[True]]
 
         def spread(v: list[float]) -> str:
             return f"{statistics.median(v):8.1f} [{min(v):.1f}, {max(v):.1f}]"
 
-        print(f"{n_targets:>7} {n:>6} {statistics.median(r[0] for r in runs[False]) * us:12.1f} "
-              f"{statistics.median(r[0] for r in runs[True]) * us:11.1f} {spread(wall):>22} {spread(cpu):>22} "
-              f"{spread(ins):>22} {statistics.median(r[3] for r in runs[True]) * 1e3:9.0f}")
+        print(f"{n_targets:>7} {statistics.median(n_steady):>6.0f} {statistics.median(off_us):12.1f} "
+              f"{statistics.median(on_us):11.1f} {spread(wall):>22} {spread(cpu):>22} {spread(ins):>22} "
+              f"{statistics.median(closing):9.0f} {statistics.median(warm):9.0f}")
         out[f"recording_{n_targets}_cost_wall_us_per_meas"] = statistics.median(wall)
         out[f"recording_{n_targets}_cost_cpu_us_per_meas"] = statistics.median(cpu)
         out[f"recording_{n_targets}_in_sink_cpu_us_per_meas"] = statistics.median(ins)
-        out[f"recording_{n_targets}_off_us_per_meas"] = statistics.median(r[0] for r in runs[False]) * us
+        out[f"recording_{n_targets}_off_us_per_meas"] = statistics.median(off_us)
     return out
 
 

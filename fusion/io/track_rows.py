@@ -176,33 +176,34 @@ class Rows:
         t, step, arr = c.t[rows], c.step[rows], c.arr[rows]
         prior = np.stack([c.X[r] if e.prior_x is None else e.prior_x for r, e in zip(rows.tolist(), es, strict=True)])
         mt = c.matched[rows]
+        meas = [k for k, e in enumerate(es) if e.meas_pos is not None]
+        meas_pos = np.array([es[k].meas_pos[: len(self.pi)] for k in meas], dtype=np.float64)  # type: ignore[index]
         for a, i in enumerate(self.pi):
             ax = self.axes[a]
             sink.col(f"{base}/position/{ax}/estimate", "scalars", width=2, names=["estimate", "prediction"],
                      colors=[colour("estimate"), colour("prediction")]).extend(
-                t, step, arr, v=list(np.column_stack([c.X[rows, i], prior[:, i]])))
+                t, step, arr, v=np.column_stack([c.X[rows, i], prior[:, i]]))
             if mt.any():
                 sink.col(f"{base}/position/{ax}/truth", "scalars", width=1, names=["truth"],
-                         colors=[colour("truth")]).extend(t[mt], step[mt], arr[mt], v=list(c.TX[rows][mt][:, i:i + 1]))
+                         colors=[colour("truth")]).extend(t[mt], step[mt], arr[mt], v=c.TX[rows][mt][:, i:i + 1])
                 e_ = c.err[rows][mt][:, i]
                 s_ = 2.0 * c.std[rows][mt][:, i]
                 sink.col(f"{base}/error/{ax}", "scalars", width=3, names=["error", "+2 sigma", "-2 sigma"],
                          colors=[colour("estimate"), colour("bound"), colour("bound")]).extend(
-                    t[mt], step[mt], arr[mt], v=list(np.column_stack([e_, s_, -s_])))
-            meas = [k for k, e in enumerate(es) if e.meas_pos is not None]
+                    t[mt], step[mt], arr[mt], v=np.column_stack([e_, s_, -s_]))
             if meas:
                 sink.col(f"{base}/position/{ax}/measurement", "scalars", width=1, names=["associated measurement"],
                          colors=[colour("associated")], points=True).extend(
-                    t[meas], step[meas], arr[meas], v=[[float(es[k].meas_pos[a])] for k in meas])  # type: ignore[index]
+                    t[meas], step[meas], arr[meas], v=meas_pos[:, a:a + 1])
         if mt.any():
             lo, hi = derive.chi2_bounds(len(self.ki))
             nv = c.nees[rows][mt]
             sink.col(f"{base}/nees", "scalars", width=3, names=[f"NEES (n={len(self.ki)})", "2.5 %", "97.5 %"],
                      colors=[colour("nees"), colour("bound"), colour("bound")]).extend(
-                t[mt], step[mt], arr[mt], v=list(np.column_stack([nv, np.full_like(nv, lo), np.full_like(nv, hi)])))
+                t[mt], step[mt], arr[mt], v=np.column_stack([nv, np.full_like(nv, lo), np.full_like(nv, hi)]))
         d = len(self.layout)
         sink.col(f"{base}/std", "scalars", width=d, names=[f"sigma {x}" for x in self.layout],
-                 colors=series_colours(d)).extend(t, step, arr, v=list(c.std[rows]))
+                 colors=series_colours(d)).extend(t, step, arr, v=c.std[rows])
         self._update_parts(sink, base, es, t, step, arr)
         self._cursor(sink, tid, lab, rows, es, c)
 
@@ -223,13 +224,13 @@ class Rows:
             nis = np.array([es[k].nis for k in ks], dtype=np.float64)
             sink.col(f"{base}/nis", "scalars", width=3, names=[f"NIS (m={m})", "2.5 %", "97.5 %"],
                      colors=[colour("nis"), colour("bound"), colour("bound")]).extend(
-                t[sel], step[sel], arr[sel], v=list(np.column_stack([nis, np.full_like(nis, lo), np.full_like(nis, hi)])))
+                t[sel], step[sel], arr[sel], v=np.column_stack([nis, np.full_like(nis, lo), np.full_like(nis, hi)]))
             s2 = 2.0 * np.sqrt(np.clip(np.diagonal(S, axis1=1, axis2=2), 0.0, None))
             names = [f"y{j}" for j in range(m)] + [f"+2 sqrt S{j}{j}" for j in range(m)] + \
                     [f"-2 sqrt S{j}{j}" for j in range(m)]
             sink.col(f"{base}/innovation/{sensor}", "scalars", width=3 * m, names=names,
                      colors=series_colours(m) + [colour("bound")] * 2 * m).extend(
-                t[sel], step[sel], arr[sel], v=list(np.concatenate([Y, s2, -s2], axis=1)))
+                t[sel], step[sel], arr[sel], v=np.concatenate([Y, s2, -s2], axis=1))
             kg = [k for k in ks if es[k].H is not None and es[k].prior_P is not None]
             if kg:
                 gs = np.array(kg)
@@ -239,13 +240,13 @@ class Rows:
                 K = np.swapaxes(np.linalg.solve(Sg, H @ Pm), 1, 2)  # P- H' S^-1, S symmetric
                 sink.col(f"{base}/gain/{sensor}", "scalars", width=d * m,
                          names=[f"K[{x},{j}]" for x in self.layout for j in range(m)],
-                         colors=series_colours(d * m)).extend(t[gs], step[gs], arr[gs], v=list(K.reshape(len(kg), -1)))
+                         colors=series_colours(d * m)).extend(t[gs], step[gs], arr[gs], v=K.reshape(len(kg), -1))
         mk = [k for k, e in enumerate(es) if e.mode_probabilities is not None]
         if mk:
             mu = np.stack([es[k].mode_probabilities for k in mk])  # type: ignore[misc]
             sel = np.array(mk)
             sink.col(f"{base}/mode", "scalars", width=mu.shape[1], names=_mode_names(sink.mode_names, mu.shape[1]),
-                     colors=series_colours(mu.shape[1])).extend(t[sel], step[sel], arr[sel], v=list(mu))
+                     colors=series_colours(mu.shape[1])).extend(t[sel], step[sel], arr[sel], v=mu)
 
     def _cursor(self, sink: Any, tid: int, lab: str, rows: Array, es: list[Estimate], c: _Stacked) -> None:
         """Labelled point and 2-sigma ellipse at the cursor; a start marker at the first row."""
@@ -257,20 +258,20 @@ class Rows:
                 int(t[0]), int(step[0]), int(arr[0]), p=W[:1])  # green: the colour says start, no text to clutter
         self._last[tid] = (int(t[-1]), int(step[-1]), int(arr[-1]), W[-1].copy())
         sink.col(f"{w}/now", "points", rgba=colour("estimate"), radius=-5.0, show_labels=True).extend(
-            t, step, arr, p=list(W[:, None, :]), label=[[lab]] * len(rows))
+            t, step, arr, p=W[:, None, :], label=[[lab]] * len(rows))
         Pp = c.P[rows][:, self.pi][:, :, self.pi]
         pos = c.X[rows][:, self.pi]
         if len(self.pi) == 3:
             half, quat = derive.ellipsoid_axes(Pp)
             sink.col(f"{w}/cov", "ellipsoids", rgba=colour("covariance")).extend(
-                t, step, arr, c=list(pos), h=list(half), q=list(quat))
+                t, step, arr, c=pos, h=half, q=quat)
             return
         if len(self.pi) == 2:
             strips = derive.world(derive.ellipse_points(pos, Pp))
         else:
             half = 2.0 * np.sqrt(Pp[:, 0, 0])
             strips = derive.world(np.stack([pos - half[:, None], pos + half[:, None]], axis=1))
-        sink.col(f"{w}/cov", "strips", rgba=colour("covariance")).extend(t, step, arr, s=list(strips))
+        sink.col(f"{w}/cov", "strips", rgba=colour("covariance")).extend(t, step, arr, s=strips)
 
     def mark_ends(self, sink: Any) -> None:
         """An end marker at the newest position of every viewed track (at close)."""
