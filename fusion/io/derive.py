@@ -102,7 +102,7 @@ def match_truth(t_ns: Array, X: Array, P: Array, truth: dict[int, dict[str, Arra
         if not T:
             continue
         ids = sorted(T)
-        C = np.stack([T[k] for k in ids])
+        C = np.array([T[k] for k in ids], dtype=np.float64)
         if C.shape[1] != d:
             continue
         start[u], count[u] = len(names), len(ids)

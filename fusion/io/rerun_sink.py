@@ -1,13 +1,17 @@
 """Every tracker step into a Rerun .rrd file, in columns, at a cost that does not grow with the
 number of tracks.
 
-Rerun costs ~150-300 us per `send_columns` call here, whatever its size, so rows are buffered and
+Rerun costs ~0.1-0.5 ms per `send_columns` call here, whatever its size, so rows are buffered and
 written with one call per entity, and the number of entities is bounded: the data of record are
-a few all-track entities (one row per estimate, association or event), written every
+three all-track entities (record/*: one row per estimate, association or event), written every
 `flush_interval_s` (checked on each step), at `flush_rows` pending rows and at `flush()`/`close()`;
-only the first MAX_VIEWED confirmed tracks get entities of their own (their time series and
-cursor marks, ~15 each), and those are written every `view_interval_s` (and at `flush()`/`close()`):
-a killed writer loses at most that much of them, never any of the record.
+everything else (measured points, events as text, trails, truth, counts, OSPA/GOSPA, and the
+first MAX_VIEWED confirmed tracks' own entities: their time series and cursor marks, ~15 each) is
+written every `view_interval_s` (VIEW_INTERVAL_S, and at `flush()`/`close()`): a killed writer
+loses at most that much of them, never more than flush_interval_s of the record. Rows are kept as
+numpy blocks per entity (fusion.io.columns) and the viewed tracks' estimates as stacked arrays,
+so the per-track derivation runs once per view flush; what is kept is bounded by the viewed
+tracks' rows and the drawn points, not by the estimates' covariances.
 
 Entity layout (positions in metres, world frame, 3-D points: 1-D tracks on the x axis, 2-D in the
 z = 0 plane; track labels are fusion.io.labels.short_id of the id):
@@ -48,15 +52,19 @@ from fusion.io.labels import is_epoch, short_id
 from fusion.io.palette import colour
 from fusion.tracking.results import Estimate, Outcome, StepResult
 
-_RECORD_ENTITIES = ("record/", "world/meas/")  # and "events": written at every record flush
 
 
 def _of_record(entity: str) -> bool:
-    """Whether an entity is written at every record flush (else at view flushes)."""
-    return entity.startswith(_RECORD_ENTITIES) or entity == "events"
+    """Whether an entity is written at every record flush (record/*: the data of record), else
+    at view flushes (everything drawn, the counts, the events as text)."""
+    return entity.startswith("record/")
 
 
 TRUTH_WAIT_NS = 2_000_000_000
+# The views are written every 15 s: Rerun costs ~0.1-0.5 ms per entity written and the views are
+# ~130 entities (6 tracks' series, counts, trails); every 5 s that was ~10 ms per second of CPU,
+# ~10 us per measurement at 1000 measurements/s. The record is written every flush_interval_s.
+VIEW_INTERVAL_S = 15.0
 _USED = (Outcome.UPDATED,)  # a measurement that started a track is not drawn as associated
 _RGBA_USED = np.array(colour("associated"), dtype=np.uint8)
 _RGBA_CLUTTER = np.array(colour("clutter"), dtype=np.uint8)
@@ -68,7 +76,7 @@ class RerunSink:
     def __init__(
         self, path: str | Path, *, layout: tuple[str, ...], position_indices: tuple[int, ...],
         velocity_indices: tuple[int, ...], recording_id: str = "fusion", application_id: str = "fusion",
-        flush_rows: int = 200_000, flush_interval_s: float = 0.5, view_interval_s: float = 5.0,
+        flush_rows: int = 200_000, flush_interval_s: float = 0.5, view_interval_s: float = VIEW_INTERVAL_S,
         meta: Mapping[str, Any] | None = None, counts: Callable[[], Mapping[str, int]] | None = None,
     ) -> None:
         import rerun as rr
@@ -83,7 +91,7 @@ class RerunSink:
         self._cols: dict[str, Column] = {}
         self._est: list[tuple[Estimate, int, int]] = []
         self._truth_rows: list[tuple[int, int, Array]] = []
-        self._scored: list[Any] = []  # track_rows._Stacked of the record flushes since the last view flush
+        self._scored: list[Any] = []  # the viewed tracks' rows (track_rows._Stacked) since the last view flush
         self._pending = 0
         self.rows_written = 0
         self._flush_rows = flush_rows
@@ -169,7 +177,7 @@ class RerunSink:
             rgba = np.where(used[:, None], _RGBA_USED, _RGBA_CLUTTER).astype(np.uint8)
             arr = t_ns if arrival_ns is None else arrival_ns
             self.col(f"world/meas/{sensor_id}", "points", radius=-2.5).add(
-                t_ns, step, arr, p=world(np.stack([m.position for m in ms])), rgba=rgba)
+                t_ns, step, arr, p=world(np.array([m.position for m in ms], dtype=np.float64)), rgba=rgba)
             self._pending += 1
         A = result.associations
         if A:
@@ -217,10 +225,11 @@ class RerunSink:
         TRUTH_WAIT_NS) wait for the next flush: truth may arrive just after the measurements of the
         same time, and scoring needs it.
 
-        The record (record/*, events, world/meas/*: what `fusion inspect` reads) is scored and
-        written at every call; everything else (trails, truth, the viewed tracks, OSPA/GOSPA,
-        counts) is kept as stacked arrays and derived and written at view flushes only, so the
-        per-entity cost of Rerun and the per-track derivation are paid once per view_interval_s."""
+        The record (record/*: what `fusion inspect` scores) is scored and written at every call;
+        the rows of everything else (measured points, events as text, trails, truth, OSPA/GOSPA,
+        counts) are kept as column chunks and the viewed tracks' estimates as stacked arrays,
+        derived and written at view flushes only: Rerun's per-entity cost and the per-track
+        derivation are paid once per view_interval_s."""
         est, self._est = self._est, []
         newest = self.rows.newest_truth_ns
         if not final and newest is not None and est:
@@ -232,7 +241,7 @@ class RerunSink:
         truth, self._truth_rows = self._truth_rows, []
         if truth:
             t_t = [r[0] for r in truth]
-            W = world(np.stack([r[2] for r in truth])[:, self.rows.pi])
+            W = world(np.array([r[2] for r in truth], dtype=np.float64)[:, self.rows.pi])
             self.col("world/truth", "points", rgba=colour("truth"), radius=-1.5).extend(
                 t_t, [r[1] for r in truth], t_t, p=W[:, None, :])
         scored = self.rows.score(est, self)

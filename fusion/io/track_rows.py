@@ -1,7 +1,7 @@
 """The rows a flush derives from the kept estimates (see fusion.io.rerun_sink for the layout and
 fusion.io.derive for the math): `score`, at every record flush, the all-track data of record;
-`views`, at every view flush, the trails and the time series of the viewed tracks from the
-stacked estimates of the record flushes since the last one. Stacked numpy over all estimates of a
+with the trails and OSPA/GOSPA; `views`, at every view flush, the time series of the viewed
+tracks from their rows of the record flushes since the last one. Stacked numpy over all estimates of a
 flush; the per-track work is bounded by the number of viewed tracks (MAX_VIEWED) and done once
 per view flush, however many record flushes came before it."""
 
@@ -69,9 +69,11 @@ class Rows:
     # ---- one flush -------------------------------------------------------------------------------
     def score(self, est: list[tuple[Estimate, int, int]], sink: Any) -> _Stacked | None:
         """The record/estimates rows of a record flush's estimates, scored against the truth at
-        their times (retractions as NaN rows); the live ones stacked for `views` (None if none).
-        Also picks the viewed tracks (the first MAX_VIEWED confirmed ones, in row order) and
-        widens the scene's extent."""
+        their times (retractions as NaN rows), the trails (world/estimates, world/tentative) and
+        OSPA/GOSPA; picks the viewed tracks (the first MAX_VIEWED confirmed ones, in row order) and
+        widens the scene's extent. Returns the viewed tracks' confirmed rows, stacked, for `views`
+        (None if none): what is kept until the view flush is bounded by the viewed tracks, not
+        by the number of tracks."""
         retracted = [r for r in est if r[0].status == "retracted"]
         live = [r for r in est if r[0].status != "retracted"]
         rec = sink.col("record/estimates", "record")
@@ -91,8 +93,8 @@ class Rows:
         t = np.array([e.t_ns for e in E_], dtype=np.int64)
         arr = np.array([r[1] for r in live], dtype=np.int64)
         step = np.array([r[2] for r in live], dtype=np.int64)
-        X = np.stack([e.x for e in E_])
-        P = np.stack([e.P for e in E_])
+        X = np.array([e.x for e in E_], dtype=np.float64)
+        P = np.array([e.P for e in E_], dtype=np.float64)
         std = np.sqrt(np.clip(np.diagonal(P, axis1=1, axis2=2), 0.0, None))
         n = len(E_)
         m_idx, TX, targets = derive.match_truth(t, X, P, self.truth, self.pi)
@@ -124,28 +126,29 @@ class Rows:
                 break
             if ids[i] not in self.viewed:
                 self.viewed[ids[i]] = short_id(ids[i])
-        return _Stacked(t, step, arr, X, P, std, err, matched, nees, TX_full(TX, m_idx, X.shape), W,
-                        E=E_, ids=ids, conf=conf)
-
-    def views(self, batches: list[_Stacked], sink: Any) -> None:
-        """The rows a reviewer looks at, from the stacked estimates of the record flushes since the
-        last view flush (in their order): trails, OSPA/GOSPA (per record flush, as scored), and
-        the viewed tracks' time series and cursor marks."""
-        if not batches:
-            return
-        for b in batches:
-            self._set_distances(sink, b.t, b.step, b.arr, b.W, b.conf, b.ids)
-        c = batches[0] if len(batches) == 1 else _Stacked.concat(batches)
-        for mask, entity, role, radius in ((c.conf, "world/estimates", "estimate", -2.0),
-                                           (~c.conf, "world/tentative", "tentative", -1.5)):
+        for mask, entity, role, radius in ((conf, "world/estimates", "estimate", -2.0),
+                                           (~conf, "world/tentative", "tentative", -1.5)):
             if mask.any():
                 sink.col(entity, "points", rgba=colour(role), radius=radius).extend(
-                    c.t[mask], c.step[mask], c.arr[mask], p=c.W[mask][:, None, :])
+                    t[mask], step[mask], arr[mask], p=W[mask][:, None, :])
+        self._set_distances(sink, t, step, arr, W, conf, ids)
+        viewed = self.viewed
+        sel = np.array([i for i, tid in enumerate(ids) if tid in viewed and conf[i]], dtype=np.int64)
+        if not sel.size:
+            return None
+        return _Stacked(t[sel], step[sel], arr[sel], X[sel], P[sel], std[sel], err[sel], matched[sel], nees[sel],
+                        TX_full(TX, m_idx, X.shape)[sel], W[sel], E=[E_[i] for i in sel.tolist()],
+                        ids=[ids[i] for i in sel.tolist()], conf=conf[sel])
+
+    def views(self, batches: list[_Stacked], sink: Any) -> None:
+        """The viewed tracks' time series and cursor marks, from their rows of the record flushes
+        since the last view flush (in their order)."""
+        if not batches:
+            return
+        c = batches[0] if len(batches) == 1 else _Stacked.concat(batches)
         rows_of: dict[int, list[int]] = defaultdict(list)
-        viewed, conf = self.viewed, c.conf
-        for i, tid in enumerate(c.ids):  # a viewed track's confirmed rows (a flush's cut must not matter)
-            if tid in viewed and conf[i]:
-                rows_of[tid].append(i)
+        for i, tid in enumerate(c.ids):
+            rows_of[tid].append(i)
         E_ = c.E
         for tid in sorted(rows_of, key=list(self.viewed).index):
             self._track(sink, tid, np.array(rows_of[tid]), [E_[i] for i in rows_of[tid]], c)
@@ -174,7 +177,8 @@ class Rows:
         lab = self.viewed[tid]
         base = f"tracks/{lab}"
         t, step, arr = c.t[rows], c.step[rows], c.arr[rows]
-        prior = np.stack([c.X[r] if e.prior_x is None else e.prior_x for r, e in zip(rows.tolist(), es, strict=True)])
+        prior = np.array([c.X[r] if e.prior_x is None else e.prior_x for r, e in zip(rows.tolist(), es, strict=True)],
+                         dtype=np.float64)
         mt = c.matched[rows]
         meas = [k for k, e in enumerate(es) if e.meas_pos is not None]
         meas_pos = np.array([es[k].meas_pos[: len(self.pi)] for k in meas], dtype=np.float64)  # type: ignore[index]
@@ -217,8 +221,8 @@ class Rows:
                 by_sensor[e.sensor_id].append(k)
         for sensor, ks in sorted(by_sensor.items()):
             sel = np.array(ks)
-            Y = np.stack([es[k].y for k in ks])  # type: ignore[misc]
-            S = np.stack([es[k].S for k in ks])  # type: ignore[misc]
+            Y = np.array([es[k].y for k in ks], dtype=np.float64)  # type: ignore[misc]
+            S = np.array([es[k].S for k in ks], dtype=np.float64)  # type: ignore[misc]
             m = Y.shape[1]
             lo, hi = derive.chi2_bounds(m)
             nis = np.array([es[k].nis for k in ks], dtype=np.float64)
@@ -234,16 +238,16 @@ class Rows:
             kg = [k for k in ks if es[k].H is not None and es[k].prior_P is not None]
             if kg:
                 gs = np.array(kg)
-                H = np.stack([es[k].H for k in kg])  # type: ignore[misc]
-                Pm = np.stack([es[k].prior_P for k in kg])  # type: ignore[misc]
-                Sg = np.stack([es[k].S for k in kg])  # type: ignore[misc]
+                H = np.array([es[k].H for k in kg], dtype=np.float64)  # type: ignore[misc]
+                Pm = np.array([es[k].prior_P for k in kg], dtype=np.float64)  # type: ignore[misc]
+                Sg = np.array([es[k].S for k in kg], dtype=np.float64)  # type: ignore[misc]
                 K = np.swapaxes(np.linalg.solve(Sg, H @ Pm), 1, 2)  # P- H' S^-1, S symmetric
                 sink.col(f"{base}/gain/{sensor}", "scalars", width=d * m,
                          names=[f"K[{x},{j}]" for x in self.layout for j in range(m)],
                          colors=series_colours(d * m)).extend(t[gs], step[gs], arr[gs], v=K.reshape(len(kg), -1))
         mk = [k for k, e in enumerate(es) if e.mode_probabilities is not None]
         if mk:
-            mu = np.stack([es[k].mode_probabilities for k in mk])  # type: ignore[misc]
+            mu = np.array([es[k].mode_probabilities for k in mk], dtype=np.float64)  # type: ignore[misc]
             sel = np.array(mk)
             sink.col(f"{base}/mode", "scalars", width=mu.shape[1], names=_mode_names(sink.mode_names, mu.shape[1]),
                      colors=series_colours(mu.shape[1])).extend(t[sel], step[sel], arr[sel], v=mu)
@@ -282,8 +286,8 @@ class Rows:
 
 
 class _Stacked:
-    """The stacked arrays of the live estimates of one record flush (or of several, concatenated),
-    with the estimates themselves (E), their track ids and whether each is confirmed."""
+    """The stacked arrays of the viewed tracks' rows of one record flush (or of several,
+    concatenated), with the estimates themselves (E), their track ids and whether each is confirmed."""
 
     __slots__ = ("E", "P", "TX", "W", "X", "arr", "conf", "err", "ids", "matched", "nees", "std", "step", "t")
 
