@@ -20,6 +20,8 @@ from typing import Any
 import pyarrow as pa
 from rerun.chunk import RrdReader
 
+from tests.io.scenario_run import record_scenario
+
 
 def _canon(v: Any) -> Any:
     if isinstance(v, float):
@@ -64,35 +66,11 @@ def digest(path: str | Path) -> dict[str, dict[str, Any]]:
 
 
 def record(name: str, path: Path, *, duration_s: float, flush_rows: int = 300) -> None:
-    """The reference scenario `name` through the Pipeline into a RerunSink at `path`, as
-    tests.io.scenario_run.record_scenario, with record flushes every `flush_rows` pending rows and
-    no flush on the wall clock (so the flushes fall at the same steps in every run)."""
-    import msgspec
-
-    from fusion.io import wire
-    from fusion.io.rerun_sink import RerunSink
-    from fusion.pipeline import Pipeline
-    from fusion.tracking.tracker import Tracker
-    from publishers.spec import load_scenario_file, scenario_path
-    from publishers.stream import build_stream
-
-    sf = load_scenario_file(scenario_path(name))
-    spec = msgspec.structs.replace(sf.scenario, duration_s=duration_s)
-    samples, _ = build_stream(spec, namespace=sf.service.namespace)
-    tracker = Tracker(sf.service.tracker)
-    pipe: Pipeline | None = None
-    sink = RerunSink(path, recording_id=name, layout=tracker.layout, position_indices=tracker.position_indices,
-                     velocity_indices=tracker.velocity_indices, meta={"scenario": name},
-                     counts=lambda: pipe.counts().flat(),  # type: ignore[union-attr]
-                     flush_rows=flush_rows, flush_interval_s=1e9, view_interval_s=1e9)
-    pipe = Pipeline(tracker, wire.Codec(sf.service.namespace), sink=sink)
-    records = [(s.arrival_ns, s.key, s.payload) for s in samples]
-    try:
-        for i in range(0, len(records), 50):
-            pipe.ingest(records[i:i + 50])
-    finally:
-        sink.close()
-        pipe.warn.flush()
+    """The reference scenario `name` through the Pipeline into a RerunSink at `path`
+    (tests.io.scenario_run.record_scenario), with record flushes every `flush_rows` pending rows
+    and none on the wall clock (so the flushes fall at the same steps in every run)."""
+    record_scenario(name, path, duration_s=duration_s, flush_rows=flush_rows, flush_interval_s=1e9,
+                    view_interval_s=1e9)
 
 
 SCENARIOS = {"mix": 20.0, "helix3d": 30.0, "cv1d_a": 8.0}  # name -> seconds of the scenario

@@ -46,14 +46,16 @@ def latest(results: list[StepResult]) -> dict[tuple[int, int, str], Estimate]:
     return out
 
 
-def record_scenario(name: str, path, *, duration_s: float | None = None, sink_factory=None):
+def record_scenario(name: str, path, *, duration_s: float | None = None, flush_rows: int = 200_000,
+                    flush_interval_s: float = 0.5, view_interval_s: float | None = None):
     """The reference scenario `name` (configs/scenarios/<name>.toml) as the service runs it: its
     stream of samples (measurements and truth) through the Pipeline with a RerunSink writing
-    `path`. Returns the pipeline (its tracker and counts) after the sink is closed."""
+    `path` (flushed as the arguments say; view_interval_s None: the sink's default). Returns the
+    pipeline (its tracker and counts) after the sink is closed."""
     import msgspec
 
     from fusion.io import wire
-    from fusion.io.rerun_sink import RerunSink
+    from fusion.io.rerun_sink import VIEW_INTERVAL_S, RerunSink
     from fusion.pipeline import Pipeline
     from publishers.spec import load_scenario_file, scenario_path
     from publishers.stream import build_stream
@@ -65,7 +67,9 @@ def record_scenario(name: str, path, *, duration_s: float | None = None, sink_fa
     pipe: Pipeline | None = None
     sink = RerunSink(path, recording_id=name, layout=tracker.layout, position_indices=tracker.position_indices,
                      velocity_indices=tracker.velocity_indices, meta={"scenario": name},
-                     counts=lambda: pipe.counts().flat())  # type: ignore[union-attr]
+                     counts=lambda: pipe.counts().flat(),  # type: ignore[union-attr]
+                     flush_rows=flush_rows, flush_interval_s=flush_interval_s,
+                     view_interval_s=VIEW_INTERVAL_S if view_interval_s is None else view_interval_s)
     pipe = Pipeline(tracker, wire.Codec(sf.service.namespace), sink=sink)
     records = [(s.arrival_ns, s.key, s.payload) for s in samples]
     try:
