@@ -86,8 +86,8 @@ class Column:
     def times(self) -> tuple[Array, Array, Array]:
         """(t_ns, step, arrival_ns) of every row, int64."""
         self._seal()
-        return tuple(np.concatenate([np.asarray(c[i], dtype=np.int64) for c in self.chunks])  # type: ignore[return-value]
-                     for i in range(3))
+        t, step, arrival = (np.concatenate([np.asarray(c[i], dtype=np.int64) for c in self.chunks]) for i in range(3))
+        return t, step, arrival
 
     def first_times(self) -> tuple[int, int]:
         """(t_ns, arrival_ns) of the first row (the sink decides the kind of its time axes from them)."""

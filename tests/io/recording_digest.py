@@ -5,7 +5,7 @@ A row is the tuple of its columns (the timelines and every component, RowId left
 values, floats rounded to 10 significant digits (two correct computations of the same figure may
 differ in the last bits); the rows of an entity are sorted before hashing, so how they were cut
 into chunks (the flush cadence) does not matter. `/__properties` (the recording's start time)
-is left out.
+is left out, and so is the meta's random run id.
 """
 
 from __future__ import annotations
@@ -35,6 +35,18 @@ def _canon(v: Any) -> Any:
     return v
 
 
+def _without_run_id(text: Any) -> Any:
+    """The meta JSON without its "run_id" (other values as given)."""
+    try:
+        info = json.loads(text)
+    except (TypeError, ValueError):
+        return text
+    if isinstance(info, dict):
+        info.pop("run_id", None)
+        return json.dumps(info, sort_keys=True)
+    return text
+
+
 def _values(col: Any) -> list[Any]:
     """A column's values; times (durations, timestamps) as integer ns."""
     if pa.types.is_temporal(col.type):
@@ -55,6 +67,8 @@ def digest(path: str | Path) -> dict[str, dict[str, Any]]:
         cols = [_values(b.column(n)) for n in names]
         for i in range(b.num_rows):
             row = {n: _canon(c[i]) for n, c in zip(names, cols, strict=True)}
+            if ent == "/meta":  # a run's random id is no content (fusion.io.rerun_sink run_id, where present)
+                row = {n: [_without_run_id(x) for x in v] if isinstance(v, list) else v for n, v in row.items()}
             rows[ent].append(json.dumps(row, sort_keys=True))
         if ch.is_static:
             static[ent] += b.num_rows
