@@ -1,22 +1,31 @@
-"""Cost of recording every step to Rerun, per measurement, at 10, 100 and 1000 tracks.
+"""Cost of recording every step to Rerun, per measurement, at 10, 100 and 1000 targets, in the
+shipped configuration.
 
-Scenario (bench.tracker_scan.scans): T constant-velocity targets in a 10 km square, one Cartesian
-sensor at 10 Hz with clutter (T/10 false returns per scan), the truth of every target logged at
-every scan (so estimates are scored: error, NEES, OSPA). Each scan goes through Tracker.process
-and the result to the sink with log_step, as fusion.pipeline does. Three runs interleaved per
-repeat: no sink (the baseline), the shipped RerunSink, and main's sink before this change (read
-from git as a reference only, when the repository has a `main` branch). Reported: microseconds per
-measurement; the sink's share two ways: the difference (with sink - without) / measurements,
-which the machine's load makes noisy, and the time inside the sink's own calls (log_truth,
-log_step and the flushes on the sink's cadence) / measurements; the final flush of what is
-pending plus the close, a cost per file, apart in milliseconds.
+What runs: `configs/service.toml`'s tracker (IMM of CV and CT, radar1 + cam1) behind
+fusion.pipeline.Pipeline, the path every sample takes in `fusion serve`, with the recording the
+service builds from its [recording] section (fusion.io.recording.service_recording: rotating
+files, flushed every `flush_interval_s`, behind fusion.io.recording_guard.GuardedSink), and
+`maybe_flush` after every batch as the service's loop does. Python's collector settled as
+`fusion serve` settles it (fusion.io.gc_tuning).
+The load: bench.e2e_load.Scene (T targets, radar1 at 10 Hz, cam1 at 5 Hz: 15 measurements per
+target per second, as msgpack Measurements) plus every target's truth at every radar scan (so
+every estimate is scored: error, NEES, OSPA/GOSPA), one `Pipeline.ingest` per scan (a service
+keeping up in real time: the most steps, so the most per-step cost, per measurement).
+Baseline: the same pipeline with the recording off, interleaved with it in every repeat.
+Reported, per measurement: the cost = (with - without) / measurements, in wall time (the
+machine's load makes it noisy) and in CPU time of the whole process (time.process_time: every
+thread, Rerun's encoding and writing threads too, which share the 2 cores; other processes do not
+count); and the CPU time inside the sink's calls (log_truth, log_step, maybe_flush; thread
+time). Measured: the scans after the first WARM_S wall seconds of the recording-on run (the same scans
+in the run without) up to the end, the final flush and close included (every row recorded is
+paid for; about MEASURED_S seconds: more than one view flush). A file's start (the sink's CPU
+time in its first WARM_S seconds) and its final flush and close (within the measured figure)
+are also shown in ms. Median [min, max] over the repeats.
 """
 
 from __future__ import annotations
 
-import importlib.util
 import statistics
-import subprocess
 import sys
 import tempfile
 import time
@@ -25,122 +34,164 @@ from typing import Any
 
 import numpy as np
 
-from bench.tracker_scan import scans
-from fusion.config import CartesianSensorConfig, LifecycleConfig, MotionConfig, TrackerConfig
-from fusion.io.rerun_sink import RerunSink
-from fusion.tracking.detection import Detection
+from bench.e2e_load import SENSORS, Scene
+from fusion import messages as m
+from fusion.config import load_service_config, mode_names
+from fusion.io import wire
+from fusion.io.gc_tuning import settle_garbage_collector
+from fusion.io.recording import service_recording
+from fusion.io.recording_guard import GuardedSink
+from fusion.pipeline import Pipeline
 from fusion.tracking.tracker import Tracker
 
 REPO = Path(__file__).resolve().parents[1]
+CONFIG = REPO / "configs" / "service.toml"
+TRUTH_LAYOUT = ["x", "vx", "y", "vy", "omega"]  # the scene flies straight: omega = 0
 
 
-def _main_sink() -> Any:
-    """main's RerunSink class, loaded from `git show main:fusion/io/rerun_sink.py` (None without it)."""
-    try:
-        src = subprocess.run(["git", "-C", str(REPO), "show", "main:fusion/io/rerun_sink.py"], capture_output=True,
-                             text=True, check=True, timeout=30).stdout
-    except (subprocess.SubprocessError, OSError):
-        return None
-    path = Path(tempfile.mkdtemp()) / "main_rerun_sink.py"
-    path.write_text(src)
-    spec = importlib.util.spec_from_file_location("main_rerun_sink", path)
-    mod = importlib.util.module_from_spec(spec)  # type: ignore[arg-type]
-    sys.modules["main_rerun_sink"] = mod
-    spec.loader.exec_module(mod)  # type: ignore[union-attr]
-    return mod.RerunSink
-
-
-def _config() -> TrackerConfig:
-    return TrackerConfig(sensors=[CartesianSensorConfig(id="cam", std_m=[1.0, 1.0])],
-                         motion=MotionConfig(accel_psd_m2s3=0.1), lifecycle=LifecycleConfig(confirm_m=2, confirm_n=3))
-
-
-def _truths(n_targets: int, n_scans: int, *, seed: int = 0) -> list[np.ndarray]:
-    """The true states of bench.tracker_scan.scans (same seed, same draws)."""
-    rng = np.random.default_rng(seed)
-    x = np.column_stack([rng.uniform(-5000, 5000, n_targets), rng.uniform(-20, 20, n_targets),
-                         rng.uniform(-5000, 5000, n_targets), rng.uniform(-20, 20, n_targets)])
+def batches(n_targets: int, seconds: float, *, ns: str, seed: int = 1) -> list[list[tuple[int, str, bytes]]]:
+    """One list of (arrival_ns, key, payload) per scan: the truth of every target at radar scans,
+    then the scan's measurements; arrival = sensor time + 1 ms."""
+    scene = Scene(n_targets, seed)
+    keys = [m.meas_key(ns, s) for s in SENSORS]
+    t0 = 1_000_000_000
     out = []
-    for _ in range(n_scans):
-        x = x + 0.1 * np.column_stack([x[:, 1], np.zeros(n_targets), x[:, 3], np.zeros(n_targets)])
-        out.append(x.copy())
+    for t, s, payloads in scene.ticks(t0):
+        if t - t0 >= seconds * 1e9:
+            break
+        recs = []
+        if s == 0:
+            for j in range(n_targets):
+                x, y = scene.pos[j].tolist()
+                vx, vy = scene.vel[j].tolist()
+                tr = m.Truth(target_id=f"t{j}", t_ns=t, state=[x, vx, y, vy, 0.0], layout=TRUTH_LAYOUT)
+                recs.append((t + 1_000_000, m.truth_key(ns, f"t{j}"), m.encode(tr)))
+        recs.extend((t + 1_000_000, keys[s], p) for p in payloads)
+        out.append(recs)
     return out
 
 
-def _run(data: list, truths: list, kind: str, cls: Any, tmp: Path) -> tuple[float, float, float, int]:
-    """(seconds of steady-state processing with the flushes on the sink's cadence, seconds inside
-    the sink's calls (log_truth, log_step and the flushes they make), seconds of the final flush
-    and close, measurements)."""
-    tr = Tracker(_config())
-    sink = None
-    if cls is not None:
-        sink = cls(tmp / f"{kind}.rrd", layout=tr.layout, position_indices=tr.position_indices,
-                   velocity_indices=tr.velocity_indices, counts=lambda: tr.counts.flat())
-    seq = n_meas = 0
-    inside = 0.0
-    t0 = time.perf_counter()
-    for k, pts in enumerate(data):
-        t = (k + 1) * 100_000_000
-        if sink is not None:
-            a = time.perf_counter()
-            for j, x in enumerate(truths[k]):
-                sink.log_truth(f"target{j}", t, x)
-            inside += time.perf_counter() - a
-        dets = []
-        for p in pts:
-            dets.append(Detection.of("cam", t, seq, p))
-            seq += 1
-        n_meas += len(dets)
-        r = tr.process(dets)
-        if sink is not None:
-            a = time.perf_counter()
-            sink.log_step(r)
-            inside += time.perf_counter() - a
-    steady = time.perf_counter() - t0
-    if sink is not None:
-        sink.close()  # the final flush of everything pending, and the footer
-    return steady, inside, time.perf_counter() - t0 - steady, n_meas
+class _Timed:
+    """The pipeline's sink, timing the calls it passes on (CPU time of the calling thread: the
+    machine's other load does not count)."""
+
+    def __init__(self, sink: Any) -> None:
+        self.sink = sink
+        self.inside_s = 0.0
+
+    def log_step(self, result: Any, *, arrival_ns: int | None = None) -> None:
+        a = time.thread_time()
+        self.sink.log_step(result, arrival_ns=arrival_ns)
+        self.inside_s += time.thread_time() - a
+
+    def log_truth(self, target_id: str, t_ns: int, state: Any) -> None:
+        a = time.thread_time()
+        self.sink.log_truth(target_id, t_ns, state)
+        self.inside_s += time.thread_time() - a
+
+    def log_text(self, t_ns: int, text: str, level: str = "INFO") -> None:
+        a = time.thread_time()
+        self.sink.log_text(t_ns, text, level)
+        self.inside_s += time.thread_time() - a
+
+    def maybe_flush(self) -> None:
+        a = time.thread_time()
+        self.sink.maybe_flush()
+        self.inside_s += time.thread_time() - a
+
+    def close(self) -> None:
+        a = time.thread_time()
+        self.sink.close()
+        self.inside_s += time.thread_time() - a
 
 
-def run(*, quick: bool = False) -> dict[str, float]:
-    sinks: dict[str, Any] = {"none": None, "shipped": RerunSink}
-    main = _main_sink()
-    if main is not None:
-        sinks["main (before)"] = main
-    repeats = 2 if quick else 3
+def _run(data: list, *, record: bool, tmp: Path) -> tuple[Any, int]:
+    """Cumulative (wall s, process CPU s, CPU s inside the sink) after each scan, (n_scans + 2, 3),
+    and the measurements applied; the last row after a recording's final flush and close."""
+    cfg = load_service_config(CONFIG)
+    tr = Tracker(cfg.tracker)
+    pipe = Pipeline(tr, wire.Codec(cfg.namespace))
+    timed = None
+    if record:
+        rotating = service_recording(
+            cfg.recording, tmp, layout=tr.layout, position_indices=tr.position_indices,
+            velocity_indices=tr.velocity_indices, counts=lambda: pipe.counts().flat(),
+            meta={"namespace": cfg.namespace, "sensors": sorted(tr.sensors), "model": tr.model_name,
+                  "modes": mode_names(cfg.tracker)})
+        timed = _Timed(GuardedSink(rotating))
+        pipe.sink = timed
+    marks = np.zeros((len(data) + 2, 3))
+    t0, c0 = time.perf_counter(), time.process_time()
+    for k, recs in enumerate(data):
+        pipe.ingest(recs)
+        if timed is not None:
+            timed.maybe_flush()
+        marks[k + 1] = (time.perf_counter() - t0, time.process_time() - c0, 0.0 if timed is None else timed.inside_s)
+    if timed is not None:
+        timed.close()
+        assert timed.sink.error is None, timed.sink.error
+    marks[-1] = (time.perf_counter() - t0, time.process_time() - c0, 0.0 if timed is None else timed.inside_s)
+    return marks, tr.counts.applied
+
+
+WARM_S = 2.0  # wall seconds of a recording's start left out (its first flush and blueprint)
+MEASURED_S = 20.0  # wall seconds measured after them, about: more than one view flush (VIEW_INTERVAL_S)
+RATE = {10: 1000.0, 100: 4000.0, 1000: 4500.0}  # measurements per wall second the tracker handles here, about
+PER_S = 15  # measurements per target per second of sensor time (bench.e2e_load)
+
+
+def run(*, quick: bool = False, sizes: tuple[int, ...] = (10, 100, 1000)) -> dict[str, float]:
+    settle_garbage_collector()
+    repeats = 1 if quick else 3
+    ns = load_service_config(CONFIG).namespace
     out: dict[str, float] = {}
-    print("recording cost per measurement: T CV targets, one sensor at 10 Hz, clutter T/10 per scan, truth logged; "
-          f"median [min, max] of {repeats} interleaved repeats")
-    print(f"{'tracks':>6} {'sink':>14} {'us/meas':>10} {'difference us/meas':>22} {'in sink us/meas':>22} "
-          f"{'x no sink':>9} {'close ms':>9}")
-    for n_targets in (10, 100, 1000):
-        n_scans = ({10: 100, 100: 40, 1000: 15} if quick else {10: 300, 100: 100, 1000: 40})[n_targets]
-        data = scans(n_targets, n_scans)
-        truths = _truths(n_targets, n_scans)
-        times: dict[str, list[float]] = {k: [] for k in sinks}
-        closing: dict[str, list[float]] = {k: [] for k in sinks}
-        inside: dict[str, list[float]] = {k: [] for k in sinks}
-        n_meas = 0
+    print("recording cost per measurement, shipped configuration (configs/service.toml: IMM, radar1 + cam1, "
+          f"the service's rotating recording), truth of every target at every radar scan; median [min, max] of "
+          f"{repeats} interleaved repeats")
+    print(f"{'targets':>7} {'meas':>6} {'off us/meas':>12} {'on us/meas':>11} {'cost (wall) us/meas':>22} "
+          f"{'cost (CPU) us/meas':>22} {'in sink (CPU) us/meas':>22} {'close ms':>9} {'start ms':>9}")
+    with tempfile.TemporaryDirectory() as d:  # compiled kernels, imports, Rerun: loaded before any timing
+        _run(batches(20, 2.0, ns=ns), record=True, tmp=Path(d))
+    for n_targets in sizes:
+        wall_s = WARM_S + MEASURED_S
+        data = batches(n_targets, wall_s * RATE[n_targets] / (PER_S * n_targets), ns=ns)
+        runs: dict[bool, list[tuple[Any, int]]] = {False: [], True: []}
         with tempfile.TemporaryDirectory() as d:
-            for _ in range(repeats):
-                for kind, cls in sinks.items():
-                    s, i, c, n_meas = _run(data, truths, kind.split()[0], cls, Path(d))
-                    times[kind].append(s)
-                    inside[kind].append(i)
-                    closing[kind].append(c)
-        base = statistics.median(times["none"])
-        for kind, v in times.items():
-            med = statistics.median(v)
-            share = [(x - b) / n_meas * 1e6 for x, b in zip(v, times["none"], strict=True)]
-            spread = "" if kind == "none" else f"{statistics.median(share):8.1f} [{min(share):.1f}, {max(share):.1f}]"
-            ins = [x / n_meas * 1e6 for x in inside[kind]]
-            ins_s = "" if kind == "none" else f"{statistics.median(ins):8.1f} [{min(ins):.1f}, {max(ins):.1f}]"
-            print(f"{n_targets:>6} {kind:>14} {med / n_meas * 1e6:10.1f} {spread:>22} {ins_s:>22} {med / base:9.2f} "
-                  f"{statistics.median(closing[kind]) * 1e3:9.0f}")
-            out[f"{kind}_{n_targets}_sink_us_per_meas"] = statistics.median(share)
-            out[f"{kind}_{n_targets}_in_sink_us_per_meas"] = statistics.median(ins)
+            for k in range(repeats):
+                for record in (False, True):
+                    runs[record].append(_run(data, record=record, tmp=Path(d) / f"r{k}"))
+        meas = np.cumsum([0] + [sum(1 for _, key, _ in recs if "/truth/" not in key) for recs in data])
+        wall, cpu, ins, off_us, on_us, n_steady = [], [], [], [], [], []
+        for (off, n_off), (on, n_on) in zip(runs[False], runs[True], strict=True):
+            assert n_off == n_on == meas[-1], (n_off, n_on, meas[-1])  # every measurement applied, both ways
+            k0 = int(np.searchsorted(on[:-1, 0], WARM_S))  # the first scan after the warm-up
+            k1 = len(data)
+            if k0 >= k1 - 1:
+                raise RuntimeError(f"{n_targets} targets: the run ended within its warm-up; raise RATE")
+            n = meas[k1] - meas[k0]
+            d_off, d_on = off[-1] - off[k0], on[-1] - on[k0]  # to the end: the final flush and close included
+            wall.append((d_on[0] - d_off[0]) / n * 1e6)
+            cpu.append((d_on[1] - d_off[1]) / n * 1e6)
+            ins.append(d_on[2] / n * 1e6)
+            off_us.append(d_off[0] / n * 1e6)
+            on_us.append(d_on[0] / n * 1e6)
+            n_steady.append(int(n))
+        closing = [(on[-1, 2] - on[-2, 2]) * 1e3 for on, _ in runs[True]]
+        warm = [on[int(np.searchsorted(on[:-1, 0], WARM_S)), 2] * 1e3 for on, _ in runs[True]]
+
+        def spread(v: list[float]) -> str:
+            return f"{statistics.median(v):8.1f} [{min(v):.1f}, {max(v):.1f}]"
+
+        print(f"{n_targets:>7} {statistics.median(n_steady):>6.0f} {statistics.median(off_us):12.1f} "
+              f"{statistics.median(on_us):11.1f} {spread(wall):>22} {spread(cpu):>22} {spread(ins):>22} "
+              f"{statistics.median(closing):9.0f} {statistics.median(warm):9.0f}")
+        out[f"recording_{n_targets}_cost_wall_us_per_meas"] = statistics.median(wall)
+        out[f"recording_{n_targets}_cost_cpu_us_per_meas"] = statistics.median(cpu)
+        out[f"recording_{n_targets}_in_sink_cpu_us_per_meas"] = statistics.median(ins)
+        out[f"recording_{n_targets}_off_us_per_meas"] = statistics.median(off_us)
     return out
 
 
 if __name__ == "__main__":
-    run(quick="--quick" in sys.argv)
+    sel = tuple(int(a) for a in sys.argv[1:] if a.isdigit()) or (10, 100, 1000)
+    run(quick="--quick" in sys.argv, sizes=sel)

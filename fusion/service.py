@@ -39,7 +39,7 @@ from fusion.io import wire
 from fusion.io.checkpointer import Checkpointer, counts_since, service_checkpoint_path
 from fusion.io.gain_groups import measured_components
 from fusion.io.intake_queue import IntakeLimits, IntakeQueue
-from fusion.io.recording import RotatingSink
+from fusion.io.recording import RotatingSink, service_recording
 from fusion.io.recording_guard import GuardedSink
 from fusion.io.rerun_sink import RerunSink
 from fusion.io.stream_rotation import Retention, RotatingStream
@@ -158,17 +158,17 @@ class Service:
         rdir = Path(recording_dir) if recording_dir is not None else Path(rc.directory)
         common: dict[str, Any] = dict(
             layout=self.tracker.layout, position_indices=self.tracker.position_indices,
-            velocity_indices=self.tracker.velocity_indices, flush_interval_s=rc.flush_interval_s,
+            velocity_indices=self.tracker.velocity_indices,
             meta={"namespace": self.ns, "sensors": sorted(self.tracker.sensors), "model": self.tracker.model_name,
                   "modes": mode_names(self.config.tracker),
                   "measured": measured_components(self.tracker.sensors, self.tracker.layout)},
             counts=self._counts_for_recording,
         )
         if recording_path is not None:
-            self.sink = RerunSink(recording_path, recording_id=Path(recording_path).stem, **common)
+            self.sink = RerunSink(recording_path, recording_id=Path(recording_path).stem,
+                                  flush_interval_s=rc.flush_interval_s, **common)
         elif rc.enabled:
-            self.sink = RotatingSink(rdir, prefix=rc.prefix, rotate_bytes=int(rc.rotate_mb * 1e6),
-                                     rotate_s=rc.rotate_s, **common)
+            self.sink = service_recording(rc, rdir, **common)
         rotating = self.sink if isinstance(self.sink, RotatingSink) else None
         if stream_path is not None or (self.sink is not None and rc.stream):
             sp = Path(stream_path) if stream_path is not None else self.sink.path.with_suffix(wire.STREAM_SUFFIX)  # type: ignore[union-attr]

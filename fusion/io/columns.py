@@ -1,10 +1,16 @@
 """Pending rows of a recording, per entity, and their writing as Rerun columns.
 
 A `Column` holds the rows of one entity until the sink flushes: three times per row (sensor time
-`t`, tracker step `step`, arrival time `arrival`, integer ns) and the archetype's fields. `write`
-turns it into one `send_columns` call. Rerun's cost is mostly per call (~150-300 us here, whatever
-the number of rows), so the sink keeps the number of entities per flush bounded and the rows per
-call many.
+`t`, tracker step `step`, arrival time `arrival`, integer ns) and the archetype's fields.
+`components` turns it into the archetype columns of one `send_columns` call. Rerun's cost is
+mostly per call (~100-400 us here, whatever the number of rows), so the sink keeps the number of
+entities per flush bounded and the rows per call many.
+
+Rows arrive in chunks: `add` buffers one row (Python values), `extend` appends a block of rows
+whose fields are either sequences with one item per row or numpy arrays whose first axis is the
+row (a (n, width) array of scalars, a (n, k, 3) array of n rows of k points), or `Ragged` points
+(n rows of varying length as one flat array). Nothing is converted per row: at the flush each
+field's chunks are concatenated once (numpy where every chunk is an array, a list otherwise).
 
 Timelines: `t` and `arrival` are durations (seconds from the stream's start) when the times are
 stream-relative and timestamps (dates) when they are epoch times (fusion.io.labels.is_epoch);
@@ -13,7 +19,7 @@ stream-relative and timestamps (dates) when they are epoch times (fusion.io.labe
 
 from __future__ import annotations
 
-from collections import defaultdict
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -22,82 +28,145 @@ import pyarrow as pa
 from fusion.core.checks import Array
 
 
-class Column:
-    """Rows of one entity: times, and per field a list (one item per row, or a whole block)."""
+class Ragged:
+    """n rows of varying length as one block: `flat` (sum(lens), ...) and `lens` (n,)."""
 
-    __slots__ = ("arrival_ns", "blocks", "data", "kind", "step", "style", "t_ns")
+    __slots__ = ("flat", "lens")
+
+    def __init__(self, flat: Array, lens: Array) -> None:
+        self.flat = flat
+        self.lens = np.asarray(lens, dtype=np.int64)
+
+    def __len__(self) -> int:
+        return len(self.lens)
+
+
+class Column:
+    """Rows of one entity: times, and per field its chunks (see the module docstring)."""
+
+    __slots__ = ("_items", "blocks", "chunks", "kind", "n", "style")
 
     def __init__(self, kind: str, **style: Any) -> None:
         self.kind = kind
         self.style = style
-        self.t_ns: list[int] = []
-        self.step: list[int] = []
-        self.arrival_ns: list[int] = []
-        self.data: dict[str, list[Any]] = defaultdict(list)
-        self.blocks: dict[str, list[Array]] = defaultdict(list)  # record fields as (rows, width) blocks
+        self.n = 0
+        self.chunks: list[tuple[Any, Any, Any, dict[str, Any]]] = []  # (t, step, arrival, fields)
+        self._items: list[tuple[int, int, int, dict[str, Any]]] = []  # rows of add(), not yet a chunk
+        self.blocks: dict[str, list[Array]] = {}  # record fields as (rows, width) float blocks
 
     def __len__(self) -> int:
-        return len(self.t_ns)
+        return self.n
 
     def add(self, t_ns: int, step: int, arrival_ns: int, **fields: Any) -> None:
-        self.t_ns.append(t_ns)
-        self.step.append(step)
-        self.arrival_ns.append(arrival_ns)
-        for k, v in fields.items():
-            self.data[k].append(v)
+        self._items.append((t_ns, step, arrival_ns, fields))
+        self.n += 1
 
-    def extend(self, t_ns: Array, step: Array, arrival_ns: Array, blocks: dict[str, Array] | None = None,
-               **fields: Any) -> None:
-        """Many rows at once: times as arrays, each field a sequence with one item per row, and
-        `blocks`: vector fields as (rows, width) arrays (a record's x, std, error)."""
+    def _seal(self) -> None:
+        """The buffered rows of `add` as one chunk (a list per field)."""
+        if not self._items:
+            return
+        items, self._items = self._items, []
+        fields = {k: [it[3][k] for it in items] for k in items[0][3]}
+        self.chunks.append(([it[0] for it in items], [it[1] for it in items], [it[2] for it in items], fields))
+
+    def extend(self, t_ns: Sequence[int] | Array, step: Sequence[int] | Array, arrival_ns: Sequence[int] | Array,
+               blocks: dict[str, Array] | None = None, **fields: Any) -> None:
+        """Many rows at once: times as arrays or lists, each field a sequence with one item per
+        row or an array with one row per item of its first axis, and `blocks`: vector fields as
+        (rows, width) arrays (a record's x, std, error)."""
+        n = len(t_ns)
+        if not n:
+            return
+        self._seal()
         for k, b in (blocks or {}).items():
-            self.blocks[k].append(np.asarray(b, dtype=np.float64))
-        self.t_ns.extend(np.asarray(t_ns).tolist())
-        self.step.extend(np.asarray(step).tolist())
-        self.arrival_ns.extend(np.asarray(arrival_ns).tolist())
-        for k, v in fields.items():
-            self.data[k].extend(v)
+            self.blocks.setdefault(k, []).append(np.asarray(b, dtype=np.float64))
+        self.chunks.append((t_ns, step, arrival_ns, fields))
+        self.n += n
+
+    def times(self) -> tuple[Array, Array, Array]:
+        """(t_ns, step, arrival_ns) of every row, int64."""
+        self._seal()
+        t, step, arrival = (np.concatenate([np.asarray(c[i], dtype=np.int64) for c in self.chunks]) for i in range(3))
+        return t, step, arrival
+
+    def first_times(self) -> tuple[int, int]:
+        """(t_ns, arrival_ns) of the first row (the sink decides the kind of its time axes from them)."""
+        self._seal()
+        c = self.chunks[0]
+        return int(c[0][0]), int(c[2][0])
+
+    def field(self, name: str) -> Array | list[Any]:
+        """Every row's value of a field: one array when every chunk is an array of the same
+        trailing shape, else a list with one item per row."""
+        self._seal()
+        parts = [c[3][name] for c in self.chunks]
+        if all(isinstance(p, np.ndarray) for p in parts) and len({p.shape[1:] for p in parts}) == 1:
+            return np.concatenate(parts) if len(parts) > 1 else parts[0]
+        out: list[Any] = []
+        for p in parts:
+            out.extend(p.tolist() if isinstance(p, np.ndarray) and p.ndim == 1 else list(p))
+        return out
+
+    def has(self, name: str) -> bool:
+        self._seal()
+        return bool(self.chunks) and name in self.chunks[0][3]
+
+    def ragged(self, name: str, width: int, dtype: Any) -> tuple[Array, Array]:
+        """A per-row block field (points, their colours) as (flat (sum(lens), width), lens)."""
+        self._seal()
+        flats, lens = [], []
+        for c in self.chunks:
+            p = c[3][name]
+            if isinstance(p, Ragged):
+                flats.append(np.asarray(p.flat, dtype=dtype).reshape(-1, width))
+                lens.append(p.lens)
+            elif isinstance(p, np.ndarray) and p.ndim == 3:  # (n, k, width): n rows of k
+                flats.append(p.reshape(-1, width).astype(dtype, copy=False))
+                lens.append(np.full(p.shape[0], p.shape[1], dtype=np.int64))
+            else:  # one (k, width) block per row
+                blocks = [np.asarray(b, dtype=dtype).reshape(-1, width) for b in p]
+                flats.append(np.concatenate(blocks) if blocks else np.empty((0, width), dtype=dtype))
+                lens.append(np.array([len(b) for b in blocks], dtype=np.int64))
+        return np.concatenate(flats), np.concatenate(lens)
 
 
-def time_column(rr: Any, name: str, t_ns: list[int], *, epoch: bool) -> Any:
+def time_column(rr: Any, name: str, t_ns: Sequence[int] | Array, *, epoch: bool) -> Any:
     a = np.asarray(t_ns, dtype=np.int64)
     if epoch:
         return rr.TimeColumn(name, timestamp=a.astype("datetime64[ns]"))
     return rr.TimeColumn(name, duration=a.astype("timedelta64[ns]"))
 
 
-def _matrix(rows: list[Array], width: int) -> Array:
-    return np.asarray(rows, dtype=np.float64).reshape(len(rows), width)
-
-
 def _points(rr: Any, c: Column) -> Any:
     """Points3D rows: each row a (k, 3) block of positions, with per-point colours (and labels)."""
-    d = c.data
-    lens = [len(p) for p in d["p"]]
-    pos = np.concatenate(d["p"]) if lens else np.empty((0, 3))
-    cols = np.concatenate(d["rgba"]) if "rgba" in d else np.tile(np.array(c.style["rgba"], np.uint8), (len(pos), 1))
+    pos, lens = c.ragged("p", 3, np.float64)
+    if c.has("rgba"):
+        cols, _ = c.ragged("rgba", 4, np.uint8)
+    else:
+        cols = np.tile(np.array(c.style["rgba"], np.uint8), (len(pos), 1))
     kw: dict[str, Any] = {"positions": pos, "colors": cols,
                           "radii": np.full(len(pos), c.style.get("radius", -2.0), dtype=np.float32)}
-    if "label" in d:
-        kw["labels"] = [lab for labs in d["label"] for lab in labs]
+    if c.has("label"):
+        kw["labels"] = [lab for labs in c.field("label") for lab in labs]
         kw["show_labels"] = np.full(len(pos), c.style.get("show_labels", True))
     return rr.Points3D.columns(**kw).partition(lens)
 
 
 def _strips(rr: Any, c: Column) -> Any:
     """LineStrips3D rows: each row one strip (k, 3) (an ellipse outline)."""
-    strips = c.data["s"]
-    arr = [np.asarray(x, dtype=np.float32) for x in strips]
-    n = len(strips)
+    strips = c.field("s")
+    shapes = {np.shape(x) for x in strips}
+    # one (n, k, 3) array when every strip has k points (rerun converts it without per-strip work)
+    arr: Any = np.asarray(strips, dtype=np.float32) if len(shapes) == 1 else [np.asarray(x, np.float32) for x in strips]
+    n = len(arr)
     return rr.LineStrips3D.columns(strips=arr, colors=np.tile(np.array(c.style["rgba"], np.uint8), (n, 1)),
                                    radii=np.full(n, c.style.get("radius", -1.0), dtype=np.float32))
 
 
 def _ellipsoids(rr: Any, c: Column) -> Any:
-    d = c.data
-    n = len(d["c"])
+    n = len(c)
     return rr.Ellipsoids3D.columns(
-        centers=np.asarray(d["c"]), half_sizes=np.asarray(d["h"]), quaternions=np.asarray(d["q"]),
+        centers=np.asarray(c.field("c")), half_sizes=np.asarray(c.field("h")), quaternions=np.asarray(c.field("q")),
         colors=np.tile(np.array(c.style["rgba"], np.uint8), (n, 1)),
         line_radii=np.full(n, c.style.get("radius", -1.0), dtype=np.float32),
     )
@@ -105,11 +174,11 @@ def _ellipsoids(rr: Any, c: Column) -> Any:
 
 def components(rr: Any, c: Column) -> Any:
     """The archetype columns of a pending Column (its kind says which archetype)."""
-    d = c.data
     n = len(c)
     if c.kind == "scalars":  # every row the same number of values: one series per value
         width = c.style["width"]
-        return rr.Scalars.columns(scalars=_matrix(d["v"], width).ravel()).partition(np.full(n, width))
+        v = np.asarray(c.field("v"), dtype=np.float64).reshape(n, width)
+        return rr.Scalars.columns(scalars=v.ravel()).partition(np.full(n, width))
     if c.kind == "points":
         return _points(rr, c)
     if c.kind == "strips":
@@ -117,16 +186,18 @@ def components(rr: Any, c: Column) -> Any:
     if c.kind == "ellipsoids":
         return _ellipsoids(rr, c)
     if c.kind == "text":
-        return rr.TextLog.columns(text=d["text"], level=d["level"])
+        return rr.TextLog.columns(text=c.field("text"), level=c.field("level"))
     if c.kind == "record":  # structured rows: one AnyValues component per field
-        fields = {k: _field(v) for k, v in d.items()}
+        fields = {k: _field(c.field(k)) for k in c.chunks[0][3]}
         fields.update({k: _block(v) for k, v in c.blocks.items()})
         return rr.AnyValues.columns(**fields)
     raise AssertionError(f"unknown column kind {c.kind!r}")  # every kind is produced by the sink
 
 
-def _field(values: list[Any]) -> Any:
+def _field(values: Array | list[Any]) -> Any:
     """A record field as an arrow array: float vectors as lists of float64, the rest as given."""
+    if isinstance(values, np.ndarray):
+        return pa.array(values)
     first = values[0]
     if isinstance(first, np.ndarray):
         offsets = np.zeros(len(values) + 1, dtype=np.int32)

@@ -85,41 +85,52 @@ def quaternions(R: Array) -> Array:
 
 def match_truth(t_ns: Array, X: Array, P: Array, truth: dict[int, dict[str, Array]], pi: list[int]
                 ) -> tuple[Array, Array, list[str]]:
-    """(row indices, true states (k, d), target ids) of the estimates matched to a truth target."""
-    idx: list[int] = []
-    states: list[Array] = []
+    """(row indices, true states (k, d), target ids) of the estimates matched to a truth target.
+
+    The true targets at each estimate's time, in the order of their ids, are its candidates; the
+    nearest in position is found for every estimate at once where a time has at most 16 (the
+    distances to all candidates, padded), by a k-d tree per time where it has more; one batched
+    solve gives every squared Mahalanobis distance."""
+    d = X.shape[1]
+    times, inverse = np.unique(t_ns, return_inverse=True)
+    start = np.zeros(len(times), dtype=np.int64)
+    count = np.zeros(len(times), dtype=np.int64)
+    blocks: list[Array] = []
     names: list[str] = []
-    t_list = t_ns.tolist()
-    order = np.argsort(t_ns, kind="stable")
-    i = 0
-    while i < len(order):
-        t = t_list[order[i]]
-        j = i
-        while j < len(order) and t_list[order[j]] == t:
-            j += 1
-        rows = order[i:j]
-        i = j
-        T = truth.get(t)
+    for u, tt in enumerate(times.tolist()):
+        T = truth.get(tt)
         if not T:
             continue
         ids = sorted(T)
-        C = np.stack([T[k] for k in ids])
-        if C.shape[1] != X.shape[1]:
+        C = np.array([T[k] for k in ids], dtype=np.float64)
+        if C.shape[1] != d:
             continue
-        if len(ids) > 16:  # nearest true target by a k-d tree: O(k log j), not the k x j distances
-            best = cKDTree(C[:, pi]).query(X[rows][:, pi])[1]
-        else:
-            best = np.argmin(np.sum((X[rows][:, None, pi] - C[None, :, pi]) ** 2, axis=2), axis=1)
-        dp = X[rows][:, pi] - C[best][:, pi]
-        Pp = P[rows][:, pi][:, :, pi]
-        d2 = np.einsum("ij,ij->i", dp, np.linalg.solve(Pp, dp[..., None])[..., 0])
-        ok = d2 < MATCH_D2
-        idx.extend(rows[ok].tolist())
-        states.extend(C[best[ok]])
-        names.extend(ids[b] for b in best[ok].tolist())
-    o = np.argsort(idx, kind="stable")
-    return (np.asarray(idx, dtype=np.int64)[o], np.stack(states)[o] if states else np.empty((0, X.shape[1])),
-            [names[k] for k in o])
+        start[u], count[u] = len(names), len(ids)
+        blocks.append(C)
+        names.extend(ids)
+    rows = np.flatnonzero(count[inverse] > 0)
+    if not rows.size:
+        return np.empty(0, dtype=np.int64), np.empty((0, d)), []
+    C_all = np.concatenate(blocks)
+    u_r, Xp = inverse[rows], X[rows][:, pi]
+    best = np.empty(len(rows), dtype=np.int64)
+    small = count[u_r] <= 16
+    if small.any():  # nearest among at most 16: all distances, padded with +inf
+        k = count[u_r[small]]
+        j = np.arange(int(k.max()))
+        valid = j[None, :] < k[:, None]
+        cand = start[u_r[small]][:, None] + np.where(valid, j[None, :], 0)
+        D = np.sum((Xp[small][:, None, :] - C_all[cand][:, :, pi]) ** 2, axis=2)
+        best[small] = cand[np.arange(len(k)), np.argmin(np.where(valid, D, np.inf), axis=1)]
+    for u in np.unique(u_r[~small]).tolist():  # nearest true target by a k-d tree: O(k log j)
+        at = np.flatnonzero(u_r == u)
+        s0 = int(start[u])
+        best[at] = s0 + cKDTree(C_all[s0:s0 + count[u], pi]).query(Xp[at])[1]
+    dp = Xp - C_all[best][:, pi]
+    Pp = P[rows][:, pi][:, :, pi]
+    d2 = np.einsum("ij,ij->i", dp, np.linalg.solve(Pp, dp[..., None])[..., 0])
+    ok = d2 < MATCH_D2
+    return rows[ok], C_all[best[ok]], [names[b] for b in best[ok].tolist()]
 
 
 def nees(E: Array, P: Array, ki: list[int]) -> Array:

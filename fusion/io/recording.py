@@ -14,6 +14,7 @@ from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
+from fusion.config import RecordingConfig
 from fusion.io.rerun_sink import RerunSink
 from fusion.tracking.results import StepResult
 
@@ -85,3 +86,14 @@ class RotatingSink:
 
     def size_bytes(self) -> int:
         return sum(p.stat().st_size for p in self.files if p.exists())
+
+
+def service_recording(rc: RecordingConfig, directory: str | Path, *, layout: tuple[str, ...],
+                      position_indices: tuple[int, ...], velocity_indices: tuple[int, ...],
+                      meta: Mapping[str, Any] | None = None,
+                      counts: Callable[[], Mapping[str, int]] | None = None) -> RotatingSink:
+    """The rotating recording `fusion serve` writes for a [recording] section (rotation, flush
+    cadence), in `directory`: the one place it is built, for the service and bench.recording_cost."""
+    return RotatingSink(directory, prefix=rc.prefix, layout=layout, position_indices=position_indices,
+                        velocity_indices=velocity_indices, rotate_bytes=int(rc.rotate_mb * 1e6),
+                        rotate_s=rc.rotate_s, flush_interval_s=rc.flush_interval_s, meta=meta, counts=counts)

@@ -1,13 +1,17 @@
 """Every tracker step into a Rerun .rrd file, in columns, at a cost that does not grow with the
 number of tracks.
 
-Rerun costs ~150-300 us per `send_columns` call here, whatever its size, so rows are buffered and
+Rerun costs ~0.1-0.5 ms per `send_columns` call here, whatever its size, so rows are buffered and
 written with one call per entity, and the number of entities is bounded: the data of record are
-a few all-track entities (one row per estimate, association or event), written every
+three all-track entities (record/*: one row per estimate, association or event), written every
 `flush_interval_s` (checked on each step), at `flush_rows` pending rows and at `flush()`/`close()`;
-only the first MAX_VIEWED confirmed tracks get entities of their own (their time series and
-cursor marks, ~15 each), and those are written every `view_interval_s` (and at `flush()`/`close()`):
-a killed writer loses at most that much of them, never any of the record.
+everything else (measured points, events as text, trails, truth, counts, OSPA/GOSPA, and the
+first MAX_VIEWED confirmed tracks' own entities: their time series and cursor marks, ~15 each) is
+written every `view_interval_s` (VIEW_INTERVAL_S, and at `flush()`/`close()`): a killed writer
+loses at most that much of them, never more than flush_interval_s of the record. Rows are kept as
+numpy blocks per entity (fusion.io.columns) and the viewed tracks' estimates as stacked arrays,
+so the per-track derivation runs once per view flush; what is kept is bounded by the viewed
+tracks' rows and the drawn points, not by the estimates' covariances.
 
 Entity layout (positions in metres, world frame, 3-D points: 1-D tracks on the x axis, 2-D in the
 z = 0 plane; track labels are fusion.io.labels.short_id of the id):
@@ -52,8 +56,19 @@ from fusion.io.labels import is_epoch, short_id
 from fusion.io.palette import colour
 from fusion.tracking.results import Estimate, Outcome, StepResult
 
-_VIEW_ENTITIES = ("tracks/", "world/tracks/")
+
+
+def _of_record(entity: str) -> bool:
+    """Whether an entity is written at every record flush (record/*: the data of record), else
+    at view flushes (everything drawn, the counts, the events as text)."""
+    return entity.startswith("record/")
+
+
 TRUTH_WAIT_NS = 2_000_000_000
+# The views are written every 15 s: Rerun costs ~0.1-0.5 ms per entity written and the views are
+# ~130 entities (6 tracks' series, counts, trails); every 5 s that was ~10 ms per second of CPU,
+# ~10 us per measurement at 1000 measurements/s. The record is written every flush_interval_s.
+VIEW_INTERVAL_S = 15.0
 _USED = (Outcome.UPDATED,)  # a measurement that started a track is not drawn as associated
 _RGBA_USED = np.array(colour("associated"), dtype=np.uint8)
 _RGBA_CLUTTER = np.array(colour("clutter"), dtype=np.uint8)
@@ -65,7 +80,7 @@ class RerunSink:
     def __init__(
         self, path: str | Path, *, layout: tuple[str, ...], position_indices: tuple[int, ...],
         velocity_indices: tuple[int, ...], recording_id: str = "fusion", application_id: str = "fusion",
-        flush_rows: int = 200_000, flush_interval_s: float = 0.5, view_interval_s: float = 5.0,
+        flush_rows: int = 200_000, flush_interval_s: float = 0.5, view_interval_s: float = VIEW_INTERVAL_S,
         meta: Mapping[str, Any] | None = None, counts: Callable[[], Mapping[str, int]] | None = None,
         run_id: str | None = None,
     ) -> None:
@@ -81,6 +96,7 @@ class RerunSink:
         self._cols: dict[str, Column] = {}
         self._est: list[tuple[Estimate, int, int]] = []
         self._truth_rows: list[tuple[int, int, Array, str]] = []
+        self._scored: list[Any] = []  # the viewed tracks' rows (track_rows._Stacked) since the last view flush
         self._pending = 0
         self.rows_written = 0
         self._flush_rows = flush_rows
@@ -171,7 +187,7 @@ class RerunSink:
             rgba = np.where(used[:, None], _RGBA_USED, _RGBA_CLUTTER).astype(np.uint8)
             arr = t_ns if arrival_ns is None else arrival_ns
             self.col(f"world/meas/{sensor_id}", "points", radius=-1.75).add(
-                t_ns, step, arr, p=world(np.stack([m.position for m in ms])), rgba=rgba)
+                t_ns, step, arr, p=world(np.array([m.position for m in ms], dtype=np.float64)), rgba=rgba)
             self._pending += 1
         A = result.associations
         if A:
@@ -203,59 +219,80 @@ class RerunSink:
 
     # ---- writing ---------------------------------------------------------------------------------
     def maybe_flush(self) -> None:
-        if self._pending >= self._flush_rows or time.monotonic() - self._last_flush >= self._interval:
-            self._flush(views=time.monotonic() - self._last_view_flush >= self._view_interval, final=False)
+        """The record on its cadence (every flush_interval_s or flush_rows pending rows), the views
+        on theirs (view_interval_s)."""
+        now = time.monotonic()
+        if self._pending >= self._flush_rows or now - self._last_flush >= self._interval:
+            self._flush(views=now - self._last_view_flush >= self._view_interval, final=False)
 
     def flush(self) -> None:
         """Derive the rows of the kept estimates and write every pending row as columns."""
         self._flush(views=True, final=True)
 
-    def _flush(self, *, views: bool, final: bool) -> None:
-        """Write the record's rows, and the viewed tracks' rows too when `views`. Unless `final`,
-        estimates newer than the newest truth (by at most TRUTH_WAIT_NS) wait for the next flush:
-        truth may arrive just after the measurements of the same time, and scoring needs it."""
+    def _flush(self, *, views: bool, final: bool, ends: bool = False) -> None:
+        """Write the record's rows, and the views' rows too when `views` (with the viewed tracks'
+        end markers when `ends`). Unless `final`, estimates newer than the newest truth (by at most
+        TRUTH_WAIT_NS) wait for the next flush: truth may arrive just after the measurements of the
+        same time, and scoring needs it.
+
+        The record (record/*: what `fusion inspect` scores) is scored and written at every call;
+        the rows of everything else (measured points, events as text, trails, truth, OSPA/GOSPA,
+        counts) are kept as column chunks and the viewed tracks' estimates as stacked arrays,
+        derived and written at view flushes only: Rerun's per-entity cost and the per-track
+        derivation are paid once per view_interval_s."""
         est, self._est = self._est, []
         newest = self.rows.newest_truth_ns
-        if not final and newest is not None:
-            self._est = [r for r in est if newest < r[0].t_ns <= newest + TRUTH_WAIT_NS]
-            est = [r for r in est if not newest < r[0].t_ns <= newest + TRUTH_WAIT_NS]
+        if not final and newest is not None and est:
+            t_est = np.fromiter((r[0].t_ns for r in est), dtype=np.int64, count=len(est))
+            wait = (t_est > newest) & (t_est <= newest + TRUTH_WAIT_NS)
+            if wait.any():
+                self._est = [r for r, w in zip(est, wait.tolist(), strict=True) if w]
+                est = [r for r, w in zip(est, wait.tolist(), strict=True) if not w]
         truth, self._truth_rows = self._truth_rows, []
         if truth:
             t_t = [r[0] for r in truth]
-            S = np.stack([r[2] for r in truth])
+            S = np.array([r[2] for r in truth], dtype=np.float64)
             self.col("record/truth", "record").extend(t_t, [r[1] for r in truth], t_t, blocks={"x": S},
                                                       target=[r[3] for r in truth])  # float64: for inspect
             W = world(S[:, self.rows.pi])
             self.col("world/truth", "points", rgba=colour("truth"), radius=-1.5).extend(
-                t_t, [r[1] for r in truth], t_t, p=list(W[:, None, :]))
-        self.rows.derive(est, self)
+                t_t, [r[1] for r in truth], t_t, p=W[:, None, :])
+        scored = self.rows.score(est, self)
+        if scored is not None:
+            self._scored.append(scored)
         if self._counts is not None and self._pending:
             for name, v in sorted(self._counts().items()):
                 self.col(f"counts/{name}", "scalars", width=1).add(self._newest_t, self._step, self._newest_t, v=[v])
         if views:
+            batches, self._scored = self._scored, []
+            self.rows.views(batches, self)
+            if ends:
+                self.rows.mark_ends(self)
             cols, self._cols = self._cols, {}
             self._last_view_flush = time.monotonic()
         else:
-            cols = {k: self._cols.pop(k) for k in list(self._cols) if not k.startswith(_VIEW_ENTITIES)}
+            cols = {k: self._cols.pop(k) for k in [k for k in self._cols if _of_record(k)]}
         if cols and self._epoch is None:
-            firsts = [c.t_ns[0] for c in cols.values() if len(c)]
-            arrivals = [c.arrival_ns[0] for c in cols.values() if len(c)]
-            self._epoch = bool(firsts) and is_epoch(min(firsts))
-            self._arrival_epoch = bool(arrivals) and is_epoch(min(arrivals))
+            firsts = [c.first_times() for c in cols.values() if len(c)]
+            self._epoch = bool(firsts) and is_epoch(min(f[0] for f in firsts))
+            self._arrival_epoch = bool(firsts) and is_epoch(min(f[1] for f in firsts))
         rr = self._rr
+        n_written = len(self._written)
         for entity in sorted(cols):
             c = cols[entity]
             if not len(c):
                 continue
             self._style(entity, c)
-            idx = [time_column(rr, "t", c.t_ns, epoch=bool(self._epoch)),
-                   rr.TimeColumn("step", sequence=np.asarray(c.step, dtype=np.int64)),
-                   time_column(rr, "arrival", c.arrival_ns, epoch=bool(self._arrival_epoch))]
+            t_ns, step, arrival_ns = c.times()
+            idx = [time_column(rr, "t", t_ns, epoch=bool(self._epoch)),
+                   rr.TimeColumn("step", sequence=step),
+                   time_column(rr, "arrival", arrival_ns, epoch=bool(self._arrival_epoch))]
             self.rec.send_columns(entity, indexes=idx, columns=components(rr, c), strict=True)
             self.rows_written += len(c)
             self._written.add("/" + entity)
         self._pending = 0
-        self._send_blueprint()
+        if views or len(self._written) != n_written:
+            self._send_blueprint()
         self._last_flush = time.monotonic()
 
     def _style(self, entity: str, c: Column) -> None:
@@ -288,8 +325,7 @@ class RerunSink:
         """Flush everything, mark where viewed tracks end, and finish the file (complete footer)."""
         if self._closed:
             return
-        self.rows.mark_ends(self)
-        self.flush()
+        self._flush(views=True, final=True, ends=True)
         self.rec.flush()
         self.rec.disconnect()
         self._closed = True

@@ -1,7 +1,9 @@
 """The rows a flush derives from the kept estimates (see fusion.io.rerun_sink for the layout and
-fusion.io.derive for the math): the all-track data of record, the trails, and the time series of
-the viewed tracks. Stacked numpy over all estimates of a flush; the per-track work is bounded by
-the number of viewed tracks (MAX_VIEWED)."""
+fusion.io.derive for the math): `score`, at every record flush, the all-track data of record;
+with the trails and OSPA/GOSPA; `views`, at every view flush, the time series of the viewed
+tracks from their rows of the record flushes since the last one. Stacked numpy over all estimates of a
+flush; the per-track work is bounded by the number of viewed tracks (MAX_VIEWED) and done once
+per view flush, however many record flushes came before it."""
 
 from __future__ import annotations
 
@@ -72,24 +74,34 @@ class Rows:
         return s
 
     # ---- one flush -------------------------------------------------------------------------------
-    def derive(self, est: list[tuple[Estimate, int, int]], sink: Any) -> None:
+    def score(self, est: list[tuple[Estimate, int, int]], sink: Any) -> _Stacked | None:
+        """The record/estimates rows of a record flush's estimates, scored against the truth at
+        their times (retractions as NaN rows), the trails (world/estimates, world/tentative) and
+        OSPA/GOSPA; picks the viewed tracks (the first MAX_VIEWED confirmed ones, in row order) and
+        widens the scene's extent. Returns the viewed tracks' confirmed rows, stacked, for `views`
+        (None if none): what is kept until the view flush is bounded by the viewed tracks, not
+        by the number of tracks."""
         retracted = [r for r in est if r[0].status == "retracted"]
         live = [r for r in est if r[0].status != "retracted"]
         rec = sink.col("record/estimates", "record")
         d = len(self.layout)
-        for e, arr, step in retracted:  # x, std, error: NaN rows
-            nan = np.full((1, d), np.nan)
-            rec.extend([e.t_ns], [step], [arr], blocks={"x": nan, "std": nan, "error": nan}, track=[e.track_id],
-                       label=[short_id(e.track_id)], sensor=[e.sensor_id], seq=[e.seq], status=[e.status],
-                       revision=[e.revision], nis=[np.nan], nis_dof=[0], nees=[np.nan], nees_dof=[0], target=[""])
+        if retracted:  # x, std, error: NaN rows
+            E_r = [r[0] for r in retracted]
+            nan = np.full((len(E_r), d), np.nan)
+            ids_r = [e.track_id for e in E_r]
+            rec.extend([e.t_ns for e in E_r], [r[2] for r in retracted], [r[1] for r in retracted],
+                       blocks={"x": nan, "std": nan, "error": nan}, track=ids_r, label=[short_id(i) for i in ids_r],
+                       sensor=[e.sensor_id for e in E_r], seq=[e.seq for e in E_r], status=[e.status for e in E_r],
+                       revision=[e.revision for e in E_r], nis=[np.nan] * len(E_r), nis_dof=[0] * len(E_r),
+                       nees=[np.nan] * len(E_r), nees_dof=[0] * len(E_r), target=[""] * len(E_r))
         if not live:
-            return
+            return None
         E_ = [r[0] for r in live]
         t = np.array([e.t_ns for e in E_], dtype=np.int64)
         arr = np.array([r[1] for r in live], dtype=np.int64)
         step = np.array([r[2] for r in live], dtype=np.int64)
-        X = np.stack([e.x for e in E_])
-        P = np.stack([e.P for e in E_])
+        X = np.array([e.x for e in E_], dtype=np.float64)
+        P = np.array([e.P for e in E_], dtype=np.float64)
         std = np.sqrt(np.clip(np.diagonal(P, axis1=1, axis2=2), 0.0, None))
         n = len(E_)
         m_idx, TX, targets = derive.match_truth(t, X, P, self.truth, self.pi)
@@ -103,21 +115,16 @@ class Rows:
             target[i] = name
         matched = np.zeros(n, dtype=bool)
         matched[m_idx] = True
-        nis = np.array([np.nan if e.nis is None else e.nis for e in E_])
+        nis = np.array([np.nan if e.nis is None else e.nis for e in E_], dtype=np.float64)
         nis_dof = np.array([0 if e.y is None else e.y.shape[0] for e in E_], dtype=np.int64)
         ids = [e.track_id for e in E_]
         status = [e.status for e in E_]
         rec.extend(t, step, arr, track=ids, label=[short_id(i) for i in ids], sensor=[e.sensor_id for e in E_],
                    seq=[e.seq for e in E_], status=status, revision=[e.revision for e in E_],
-                   blocks={"x": X, "std": std, "error": err}, nis=nis.tolist(), nis_dof=nis_dof.tolist(),
-                   nees=nees.tolist(), nees_dof=np.where(matched, len(self.ki), 0).tolist(), target=target)
+                   blocks={"x": X, "std": std, "error": err}, nis=nis, nis_dof=nis_dof,
+                   nees=nees, nees_dof=np.where(matched, len(self.ki), 0), target=target)
         W = derive.world(X[:, self.pi])
-        conf = np.array([s == "confirmed" for s in status])
-        for mask, entity, role, radius in ((conf, "world/estimates", "estimate", -2.0),
-                                           (~conf, "world/tentative", "tentative", -1.5)):
-            if mask.any():
-                sink.col(entity, "points", rgba=colour(role), radius=radius).extend(
-                    t[mask], step[mask], arr[mask], p=list(W[mask][:, None, :]))
+        conf = np.array([s == "confirmed" for s in status], dtype=bool)
         if conf.any():
             self._lo = np.minimum(self._lo, W[conf].min(axis=0))
             self._hi = np.maximum(self._hi, W[conf].max(axis=0))
@@ -126,14 +133,32 @@ class Rows:
                 break
             if ids[i] not in self.viewed:
                 self.viewed[ids[i]] = short_id(ids[i])
-        rows_of: dict[int, list[int]] = defaultdict(list)
-        for i, tid in enumerate(ids):  # a viewed track's confirmed rows (a flush's cut must not matter)
-            if tid in self.viewed and conf[i]:
-                rows_of[tid].append(i)
-        cols = _Stacked(t, step, arr, X, P, std, err, matched, nees, TX_full(TX, m_idx, X.shape), W)
-        for tid in sorted(rows_of, key=list(self.viewed).index):
-            self._track(sink, tid, np.array(rows_of[tid]), [E_[i] for i in rows_of[tid]], cols)
+        for mask, entity, role, radius in ((conf, "world/estimates", "estimate", -2.0),
+                                           (~conf, "world/tentative", "tentative", -1.5)):
+            if mask.any():
+                sink.col(entity, "points", rgba=colour(role), radius=radius).extend(
+                    t[mask], step[mask], arr[mask], p=W[mask][:, None, :])
         self._set_distances(sink, t, step, arr, W, conf, ids)
+        viewed = self.viewed
+        sel = np.array([i for i, tid in enumerate(ids) if tid in viewed and conf[i]], dtype=np.int64)
+        if not sel.size:
+            return None
+        return _Stacked(t[sel], step[sel], arr[sel], X[sel], P[sel], std[sel], err[sel], matched[sel], nees[sel],
+                        TX_full(TX, m_idx, X.shape)[sel], W[sel], E=[E_[i] for i in sel.tolist()],
+                        ids=[ids[i] for i in sel.tolist()], conf=conf[sel])
+
+    def views(self, batches: list[_Stacked], sink: Any) -> None:
+        """The viewed tracks' time series and cursor marks, from their rows of the record flushes
+        since the last view flush (in their order)."""
+        if not batches:
+            return
+        c = batches[0] if len(batches) == 1 else _Stacked.concat(batches)
+        rows_of: dict[int, list[int]] = defaultdict(list)
+        for i, tid in enumerate(c.ids):
+            rows_of[tid].append(i)
+        E_ = c.E
+        for tid in sorted(rows_of, key=list(self.viewed).index):
+            self._track(sink, tid, np.array(rows_of[tid]), [E_[i] for i in rows_of[tid]], c)
 
     def _set_distances(self, sink: Any, t: Array, step: Array, arr: Array, W: Array, conf: Array,
                        ids: list[int]) -> None:
@@ -159,36 +184,38 @@ class Rows:
         lab = self.viewed[tid]
         base = f"tracks/{lab}"
         t, step, arr = c.t[rows], c.step[rows], c.arr[rows]
-        prior = np.stack([c.X[r] if e.prior_x is None else e.prior_x for r, e in zip(rows.tolist(), es, strict=True)])
+        prior = np.array([c.X[r] if e.prior_x is None else e.prior_x for r, e in zip(rows.tolist(), es, strict=True)],
+                         dtype=np.float64)
         mt = c.matched[rows]
+        meas = [k for k, e in enumerate(es) if e.meas_pos is not None]
+        meas_pos = np.array([es[k].meas_pos[: len(self.pi)] for k in meas], dtype=np.float64)  # type: ignore[index]
         for a, i in enumerate(self.pi):
             ax = self.axes[a]
             # the prediction first: a plot draws its series in order, the estimate goes on top
             sink.col(f"{base}/position/{ax}/estimate", "scalars", width=2, names=["prediction", "estimate"],
                      colors=[colour("prediction"), colour("estimate")], widths=[1.0, 2.5]).extend(
-                t, step, arr, v=list(np.column_stack([prior[:, i], c.X[rows, i]])))
+                t, step, arr, v=np.column_stack([prior[:, i], c.X[rows, i]]))
             if mt.any():
                 sink.col(f"{base}/position/{ax}/truth", "scalars", width=1, names=["truth"],  # thin: drawn after
-                         colors=[colour("truth")], widths=[1.0]).extend(t[mt], step[mt], arr[mt], v=list(c.TX[rows][mt][:, i:i + 1]))
+                         colors=[colour("truth")], widths=[1.0]).extend(t[mt], step[mt], arr[mt], v=c.TX[rows][mt][:, i:i + 1])
                 e_ = c.err[rows][mt][:, i]
                 s_ = 2.0 * c.std[rows][mt][:, i]
                 sink.col(f"{base}/error/{ax}", "scalars", width=3, names=["error", "+2 sigma", "-2 sigma"],
                          colors=[colour("estimate"), colour("bound"), colour("bound")]).extend(
-                    t[mt], step[mt], arr[mt], v=list(np.column_stack([e_, s_, -s_])))
-            meas = [k for k, e in enumerate(es) if e.meas_pos is not None]
+                    t[mt], step[mt], arr[mt], v=np.column_stack([e_, s_, -s_]))
             if meas:
                 sink.col(f"{base}/position/{ax}/measurement", "scalars", width=1, names=["associated measurement"],
                          colors=[_MEAS_UNDER_LINE], points=True, marker_size=0.75).extend(
-                    t[meas], step[meas], arr[meas], v=[[float(es[k].meas_pos[a])] for k in meas])  # type: ignore[index]
+                    t[meas], step[meas], arr[meas], v=meas_pos[:, a:a + 1])
         if mt.any():
             lo, hi = derive.chi2_bounds(len(self.ki))
             nv = c.nees[rows][mt]
             sink.col(f"{base}/nees", "scalars", width=3, names=[f"NEES (n={len(self.ki)})", "2.5 %", "97.5 %"],
                      colors=[colour("nees"), colour("bound"), colour("bound")]).extend(
-                t[mt], step[mt], arr[mt], v=list(np.column_stack([nv, np.full_like(nv, lo), np.full_like(nv, hi)])))
+                t[mt], step[mt], arr[mt], v=np.column_stack([nv, np.full_like(nv, lo), np.full_like(nv, hi)]))
         d = len(self.layout)
         sink.col(f"{base}/std", "scalars", width=d, names=[f"sigma {x}" for x in self.layout],
-                 colors=series_colours(d)).extend(t, step, arr, v=list(c.std[rows]))
+                 colors=series_colours(d)).extend(t, step, arr, v=c.std[rows])
         self._update_parts(sink, base, es, t, step, arr)
         self._cursor(sink, tid, lab, rows, es, c)
 
@@ -202,26 +229,26 @@ class Rows:
                 by_sensor[e.sensor_id].append(k)
         for sensor, ks in sorted(by_sensor.items()):
             sel = np.array(ks)
-            Y = np.stack([es[k].y for k in ks])  # type: ignore[misc]
-            S = np.stack([es[k].S for k in ks])  # type: ignore[misc]
+            Y = np.array([es[k].y for k in ks], dtype=np.float64)  # type: ignore[misc]
+            S = np.array([es[k].S for k in ks], dtype=np.float64)  # type: ignore[misc]
             m = Y.shape[1]
             lo, hi = derive.chi2_bounds(m)
             nis = np.array([es[k].nis for k in ks], dtype=np.float64)
             sink.col(f"{base}/nis", "scalars", width=3, names=[f"NIS (m={m})", "2.5 %", "97.5 %"],
                      colors=[colour("nis"), colour("bound"), colour("bound")]).extend(
-                t[sel], step[sel], arr[sel], v=list(np.column_stack([nis, np.full_like(nis, lo), np.full_like(nis, hi)])))
+                t[sel], step[sel], arr[sel], v=np.column_stack([nis, np.full_like(nis, lo), np.full_like(nis, hi)]))
             s2 = 2.0 * np.sqrt(np.clip(np.diagonal(S, axis1=1, axis2=2), 0.0, None))
             names = [f"y{j}" for j in range(m)] + [f"+2 sqrt S{j}{j}" for j in range(m)] + \
                     [f"-2 sqrt S{j}{j}" for j in range(m)]
             sink.col(f"{base}/innovation/{sensor}", "scalars", width=3 * m, names=names,
                      colors=series_colours(m) + [colour("bound")] * 2 * m).extend(
-                t[sel], step[sel], arr[sel], v=list(np.concatenate([Y, s2, -s2], axis=1)))
+                t[sel], step[sel], arr[sel], v=np.concatenate([Y, s2, -s2], axis=1))
             kg = [k for k in ks if es[k].H is not None and es[k].prior_P is not None]
             if kg:
                 gs = np.array(kg)
-                H = np.stack([es[k].H for k in kg])  # type: ignore[misc]
-                Pm = np.stack([es[k].prior_P for k in kg])  # type: ignore[misc]
-                Sg = np.stack([es[k].S for k in kg])  # type: ignore[misc]
+                H = np.array([es[k].H for k in kg], dtype=np.float64)  # type: ignore[misc]
+                Pm = np.array([es[k].prior_P for k in kg], dtype=np.float64)  # type: ignore[misc]
+                Sg = np.array([es[k].S for k in kg], dtype=np.float64)  # type: ignore[misc]
                 K = np.swapaxes(np.linalg.solve(Sg, H @ Pm), 1, 2)  # P- H' S^-1, S symmetric
                 # one scale per unit; a sink without the description (bench/recording_cost.py loads
                 # main's sink beside this module) gets the unsplit gain
@@ -231,13 +258,13 @@ class Rows:
                     sink.col(f"{base}/gain/{group}/{sensor}", "scalars", width=w,
                              names=[f"K[{x},{c}]" for x in self.layout for c in comp],
                              colors=series_colours(w)).extend(t[gs], step[gs], arr[gs],
-                                                              v=list(K[:, :, cols].reshape(len(kg), -1)))
+                                                              v=K[:, :, cols].reshape(len(kg), -1))
         mk = [k for k, e in enumerate(es) if e.mode_probabilities is not None]
         if mk:
-            mu = np.stack([es[k].mode_probabilities for k in mk])  # type: ignore[misc]
+            mu = np.array([es[k].mode_probabilities for k in mk], dtype=np.float64)  # type: ignore[misc]
             sel = np.array(mk)
             sink.col(f"{base}/mode", "scalars", width=mu.shape[1], names=_mode_names(sink.mode_names, mu.shape[1]),
-                     colors=series_colours(mu.shape[1])).extend(t[sel], step[sel], arr[sel], v=list(mu))
+                     colors=series_colours(mu.shape[1])).extend(t[sel], step[sel], arr[sel], v=mu)
 
     def _cursor(self, sink: Any, tid: int, lab: str, rows: Array, es: list[Estimate], c: _Stacked) -> None:
         """Labelled point and 2-sigma ellipse at the cursor, the faint trail of earlier ellipses
@@ -250,7 +277,7 @@ class Rows:
                 int(t[0]), int(step[0]), int(arr[0]), p=W[:1])  # green: the colour says start, no text to clutter
         self._last[tid] = (int(t[-1]), int(step[-1]), int(arr[-1]), W[-1].copy())
         sink.col(f"{w}/now", "points", rgba=colour("estimate"), radius=-5.0, show_labels=True).extend(
-            t, step, arr, p=list(W[:, None, :]), label=[[lab]] * len(rows))
+            t, step, arr, p=W[:, None, :], label=[[lab]] * len(rows))
         Pp = c.P[rows][:, self.pi][:, :, self.pi]
         pos = c.X[rows][:, self.pi]
         keep: list[int] = []
@@ -260,20 +287,20 @@ class Rows:
         if len(self.pi) == 3:
             half, quat = derive.ellipsoid_axes(Pp)
             sink.col(f"{w}/cov", "ellipsoids", rgba=colour("covariance")).extend(
-                t, step, arr, c=list(pos), h=list(half), q=list(quat))
+                t, step, arr, c=pos, h=half, q=quat)
             if keep:
                 sink.col(f"{w}/trail", "ellipsoids", rgba=colour("trail"), radius=-0.5).extend(
-                    t[k], step[k], arr[k], c=list(pos[k]), h=list(half[k]), q=list(quat[k]))
+                    t[k], step[k], arr[k], c=pos[k], h=half[k], q=quat[k])
             return
         if len(self.pi) == 2:
             strips = derive.world(derive.ellipse_points(pos, Pp))
             if keep:
                 sink.col(f"{w}/trail", "strips", rgba=colour("trail"), radius=-0.5).extend(
-                    t[k], step[k], arr[k], s=list(strips[k]))
+                    t[k], step[k], arr[k], s=strips[k])
         else:
             half = 2.0 * np.sqrt(Pp[:, 0, 0])
             strips = derive.world(np.stack([pos - half[:, None], pos + half[:, None]], axis=1))
-        sink.col(f"{w}/cov", "strips", rgba=colour("covariance")).extend(t, step, arr, s=list(strips))
+        sink.col(f"{w}/cov", "strips", rgba=colour("covariance")).extend(t, step, arr, s=strips)
 
     def mark_ends(self, sink: Any) -> None:
         """An end marker at the newest position of every viewed track (at close)."""
@@ -284,14 +311,24 @@ class Rows:
 
 
 class _Stacked:
-    """The stacked arrays of one flush's live estimates."""
+    """The stacked arrays of the viewed tracks' rows of one record flush (or of several,
+    concatenated), with the estimates themselves (E), their track ids and whether each is confirmed."""
 
-    __slots__ = ("P", "TX", "W", "X", "arr", "err", "matched", "nees", "std", "step", "t")
+    __slots__ = ("E", "P", "TX", "W", "X", "arr", "conf", "err", "ids", "matched", "nees", "std", "step", "t")
 
     def __init__(self, t: Array, step: Array, arr: Array, X: Array, P: Array, std: Array, err: Array,
-                 matched: Array, nees: Array, TX: Array, W: Array) -> None:
+                 matched: Array, nees: Array, TX: Array, W: Array, *, E: list[Estimate], ids: list[int],
+                 conf: Array) -> None:
         self.t, self.step, self.arr, self.X, self.P, self.std = t, step, arr, X, P, std
         self.err, self.matched, self.nees, self.TX, self.W = err, matched, nees, TX, W
+        self.E, self.ids, self.conf = E, ids, conf
+
+    @classmethod
+    def concat(cls, parts: list[_Stacked]) -> _Stacked:
+        arrays = [np.concatenate([getattr(p, f) for p in parts]) for f in
+                  ("t", "step", "arr", "X", "P", "std", "err", "matched", "nees", "TX", "W")]
+        return cls(*arrays, E=[e for p in parts for e in p.E], ids=[i for p in parts for i in p.ids],
+                   conf=np.concatenate([p.conf for p in parts]))
 
 
 def TX_full(TX: Array, idx: Array, shape: tuple[int, ...]) -> Array:

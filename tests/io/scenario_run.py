@@ -47,17 +47,19 @@ def latest(results: list[StepResult]) -> dict[tuple[int, int, str], Estimate]:
 
 
 def record_scenario(name: str, path, *, duration_s: float | None = None, sink_factory=None, batch: int = 50,
-                    shuffle_seed: int | None = None):
+                    shuffle_seed: int | None = None, flush_rows: int = 200_000, flush_interval_s: float = 0.5,
+                    view_interval_s: float | None = None):
     """The reference scenario `name` (configs/scenarios/<name>.toml) as the service runs it: its
     stream of samples (measurements and truth) through the Pipeline with a RerunSink writing
-    `path`, `batch` samples per ingest; with `shuffle_seed`, the measurements of each block of 40
+    `path` (flushed as the arguments say; view_interval_s None: the sink's default), `batch`
+    samples per ingest; with `shuffle_seed`, the measurements of each block of 40
     samples come in a seeded random order (more late arrivals; truth keeps its places). Returns the
     pipeline (its tracker and counts) after the sink is closed."""
     import msgspec
 
     from fusion.io import wire
     from fusion.io.gain_groups import measured_components
-    from fusion.io.rerun_sink import RerunSink
+    from fusion.io.rerun_sink import VIEW_INTERVAL_S, RerunSink
     from fusion.pipeline import Pipeline
     from publishers.spec import load_scenario_file, scenario_path
     from publishers.stream import build_stream
@@ -70,7 +72,9 @@ def record_scenario(name: str, path, *, duration_s: float | None = None, sink_fa
     sink = RerunSink(path, recording_id=name, layout=tracker.layout, position_indices=tracker.position_indices,
                      velocity_indices=tracker.velocity_indices,
                      meta={"scenario": name, "measured": measured_components(tracker.sensors, tracker.layout)},
-                     counts=lambda: pipe.counts().flat())  # type: ignore[union-attr]
+                     counts=lambda: pipe.counts().flat(),  # type: ignore[union-attr]
+                     flush_rows=flush_rows, flush_interval_s=flush_interval_s,
+                     view_interval_s=VIEW_INTERVAL_S if view_interval_s is None else view_interval_s)
     pipe = Pipeline(tracker, wire.Codec(sf.service.namespace), sink=sink)
     records = [(s.arrival_ns, s.key, s.payload) for s in samples]
     if shuffle_seed is not None:
