@@ -211,11 +211,11 @@ def table(title: str, setups_fn: Callable[[int], dict], *, n: int, repeats: int)
     print(f"  {'implementation':32s} {'us/step':>8} {'min':>7}   {head:>30} {'vs numpy':>9}")
     out = {}
     for k, v in times.items():
-        r = [a / b for a, b in zip(fp, v)]
+        r = [a / b for a, b in zip(fp, v, strict=True)]
         med = statistics.median(v)
         out[k] = {"us_median": med * 1e6, "us_min": min(v) * 1e6, "ratio_median": statistics.median(r),
                   "ratio_min": min(r), "ratio_max": max(r)}
-        rn = statistics.median([a / b for a, b in zip(tb, v)])
+        rn = statistics.median([a / b for a, b in zip(tb, v, strict=True)])
         print(f"  {k:32s} {med * 1e6:8.2f} {min(v) * 1e6:7.2f}   {statistics.median(r):12.2f}x "
               f"[{min(r):5.2f}, {max(r):5.2f}]     {rn:8.2f}x")
     return out

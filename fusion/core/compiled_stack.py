@@ -22,7 +22,7 @@ import math
 import numpy as np
 from numba import njit
 
-from fusion.core.compiled import predict_linear, update
+from fusion.core.compiled import cholesky_into, predict_linear, update
 
 
 @njit(cache=True, fastmath=False)
@@ -92,21 +92,7 @@ def innovate_many(P: np.ndarray, Y: np.ndarray, H: np.ndarray, R: np.ndarray
                 S[i, j] = a
                 S[j, i] = a
         L[:, :] = 0.0
-        good = True
-        for j in range(m):
-            d = S[j, j]
-            for k in range(j):
-                d -= L[j, k] * L[j, k]
-            if not d > 0.0:
-                good = False
-                break
-            L[j, j] = math.sqrt(d)
-            for i in range(j + 1, m):
-                s = S[i, j]
-                for k in range(j):
-                    s -= L[i, k] * L[j, k]
-                L[i, j] = s / L[j, j]
-        if not good:
+        if not cholesky_into(S, L):
             ok[q] = False
             continue
         for i in range(m):

@@ -57,7 +57,6 @@ from fusion.io.palette import colour
 from fusion.tracking.results import Estimate, Outcome, StepResult
 
 
-
 def _of_record(entity: str) -> bool:
     """Whether an entity is written at every record flush (record/*: the data of record), else
     at view flushes (everything drawn, the counts, the events as text)."""
