@@ -46,7 +46,7 @@ def latest(results: list[StepResult]) -> dict[tuple[int, int, str], Estimate]:
     return out
 
 
-def record_scenario(name: str, path, *, duration_s: float | None = None, sink_factory=None, batch: int = 50,
+def record_scenario(name: str, path, *, duration_s: float | None = None, batch: int = 50,
                     shuffle_seed: int | None = None, flush_rows: int = 200_000, flush_interval_s: float = 0.5,
                     view_interval_s: float | None = None):
     """The reference scenario `name` (configs/scenarios/<name>.toml) as the service runs it: its
