@@ -230,9 +230,11 @@ class RerunSink:
 
     def _flush(self, *, views: bool, final: bool, ends: bool = False) -> None:
         """Write the record's rows, and the views' rows too when `views` (with the viewed tracks'
-        end markers when `ends`). Unless `final`, estimates newer than the newest truth (by at most
-        TRUTH_WAIT_NS) wait for the next flush: truth may arrive just after the measurements of the
-        same time, and scoring needs it.
+        end markers when `ends`). Unless `final`, estimates at or after the newest truth time (by at
+        most TRUTH_WAIT_NS) wait for the next flush: truth arrives in time order, but may come just
+        after the measurements of the same time, and the truth of a time is complete only once a
+        later time's has come (scoring against part of it would match another target, and what is
+        scored would depend on when the flush fell).
 
         The record (record/*: what `fusion inspect` scores) is scored and written at every call;
         the rows of everything else (measured points, events as text, trails, truth, OSPA/GOSPA,
@@ -243,7 +245,7 @@ class RerunSink:
         newest = self.rows.newest_truth_ns
         if not final and newest is not None and est:
             t_est = np.fromiter((r[0].t_ns for r in est), dtype=np.int64, count=len(est))
-            wait = (t_est > newest) & (t_est <= newest + TRUTH_WAIT_NS)
+            wait = (t_est >= newest) & (t_est <= newest + TRUTH_WAIT_NS)
             if wait.any():
                 self._est = [r for r, w in zip(est, wait.tolist(), strict=True) if w]
                 est = [r for r, w in zip(est, wait.tolist(), strict=True) if not w]

@@ -7,7 +7,11 @@ retractions), helix3d (3-D: ellipsoids) and cv1d_a (1-D).
 One change on purpose: the end marker of a viewed track (world/tracks/<label>/end) was placed
 before the last flush's rows were derived, so it lagged the track's end by up to a flush (and a
 track viewed only in the last flush had none); it is now at the track's newest position. The end
-markers are checked for that instead of against the reference."""
+markers are checked for that instead of against the reference.
+
+A second: estimates at the newest truth time now wait for the next record flush (the rest of that
+time's truth may still come), so the live OSPA/GOSPA series, computed per flush, see each time's
+estimates together; mix's metrics/{ospa,gospa} were regenerated with that sink (same row counts)."""
 
 from __future__ import annotations
 
