@@ -161,7 +161,7 @@ def run_demo(*, scenario: str = "mix", duration_s: float | None = None, out: str
 
 def _recording_lines(s: Summary) -> list[str]:
     """The few facts of the recording's summary the demo report shows (the rest: fusion inspect)."""
-    rmse = "" if s.position_rmse is None else f"; position RMSE against truth {s.position_rmse:.2f}"
+    rmse = "" if s.position_rmse is None else f"; position RMSE against truth {s.position_rmse:.2f} m"
     verdicts = ", ".join(f"{name} {c.mean:.2f} ({c.verdict})" for name, c in (("NIS", s.nis), ("NEES", s.nees))
                          if c.mean is not None)
     lines = [f"  tracks     {len(s.tracks)} confirmed, {s.tentative_only} never confirmed{rmse}"]
