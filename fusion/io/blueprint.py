@@ -81,9 +81,12 @@ def build(*, ndim: int, axes: Sequence[str], viewed: Sequence[str], written: set
                                     look_target=(cx, cy, 0.0), eye_up=(0.0, 1.0, 0.0))
         cursor_only = [f"- /world/tracks/{lab}/{part}" for lab in viewed for part in ("cov", "now")]
         left.append(rrb.Spatial3DView(origin="world", contents=["$origin/**", *cursor_only],
-                                      name="trajectories up to the cursor (faint: earlier 2-sigma ellipses)", time_ranges=history, eye_controls=eye,
+                                      name="trajectories up to the cursor (faint: earlier 2-sigma ellipses)",
+                                      time_ranges=history, eye_controls=eye,
                                       line_grid=rrb.LineGrid3D(visible=ndim == 3)))
-        trails = [f"- /world/tracks/{lab}/trail" for lab in viewed]  # earlier ellipses: the trajectory view's
+        # earlier ellipses and the start markers: the trajectory view's (at the cursor, a start marker
+        # far from the track read as a target the track had lost)
+        trails = [f"- /world/tracks/{lab}/{part}" for lab in viewed for part in ("trail", "start")]
         left.append(rrb.Spatial3DView(origin="world", contents=["$origin/**", *trails],
                                       name="at the cursor (2-sigma ellipses)",
                                       eye_controls=eye, line_grid=rrb.LineGrid3D(visible=ndim == 3)))

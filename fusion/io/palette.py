@@ -18,7 +18,7 @@ ROLE_COLOURS: dict[str, tuple[int, int, int, int]] = {
     "bound": (90, 90, 90, 255),  # dark grey: +-2 sigma bands, chi-square bounds
     "nis": (150, 60, 200, 255),  # purple
     "nees": (220, 50, 50, 255),  # red
-    "start": (40, 170, 70, 255),
+    "start": (25, 25, 25, 255),  # near black: not the truth's green (a start marker read as the truth)
     "end": (220, 50, 50, 255),
 }
 # Several components of one quantity (x, vx, y, ...; IMM models): distinct, in a fixed order.

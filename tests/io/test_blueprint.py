@@ -60,3 +60,23 @@ def test_old_style_queries_select_nothing(recordings: dict[str, Path]) -> None:
 ], ids=["exact-beats-subtree", "excluded-subtree", "exact-exclusion", "subtree", "prefix-is-not-child"])
 def test_query_rules_as_documented(query: list[str], entity: str, expected: bool) -> None:
     assert selects(View("v", "3D", "/world", query), entity) is expected
+
+
+def test_the_cursor_view_shows_now_the_trajectory_view_history(recordings: dict[str, Path]) -> None:
+    """"at the cursor": each viewed track's estimate and ellipse, and the truth, but no start
+    markers or trail (at the end of a run a start marker sat 60 m from its track, in the truth's
+    green: read as the target the track had lost); the trajectory view keeps both."""
+    from fusion.io.palette import colour
+
+    data = data_entities(recordings["mix"])
+    views = {v.name: v for v in last_blueprint_views(recordings["mix"])}
+    cursor = views["at the cursor (2-sigma ellipses)"]
+    path = next(v for n, v in views.items() if n.startswith("trajectories up to the cursor"))
+    starts = [e for e in data if e.startswith("/world/tracks/") and e.endswith("/start")]
+    nows = [e for e in data if e.startswith("/world/tracks/") and e.endswith("/now")]
+    assert starts and nows
+    assert not any(selects(cursor, e) for e in starts) and all(selects(cursor, e) for e in nows)
+    assert selects(cursor, "/world/truth")
+    assert all(selects(path, e) for e in starts)
+    marks = ("start", "end", "estimate", "associated", "measurement", "prediction")
+    assert colour("truth") not in [colour(r) for r in marks]

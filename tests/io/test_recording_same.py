@@ -11,7 +11,9 @@ markers are checked for that instead of against the reference.
 
 A second: estimates at the newest truth time now wait for the next record flush (the rest of that
 time's truth may still come), so the live OSPA/GOSPA series, computed per flush, see each time's
-estimates together; mix's metrics/{ospa,gospa} were regenerated with that sink (same row counts)."""
+estimates together; mix's metrics/{ospa,gospa} were regenerated with that sink (same row counts).
+A third: the start markers (world/tracks/<label>/start) are near black, no longer the truth's
+green; their rows were regenerated (the colour is their only change)."""
 
 from __future__ import annotations
 
