@@ -275,7 +275,8 @@ def run(*, quick: bool = False, with_batch: bool = True) -> dict[str, object]:
         "kf": table("KF predict+update, 4-state CV, 2-D position", kf_setups, n=n, repeats=repeats),
         "ekf": table("EKF predict+update, radar2d (range, bearing)", ekf_setups, n=n, repeats=repeats),
     }
-    for key, name in (("kf", "fusion KF"), ("ekf", "fusion EKF")):
+    for key, name in (("kf", "fusion KF"), ("kf", "fusion KF step()"), ("ekf", "fusion EKF"),
+                      ("ekf", "fusion EKF step()")):
         r = out[key][name]  # type: ignore[index]
         print(f"goal: {name} (inputs validated) >= {GOAL:.0f}x filterpy: median {r['ratio_median']:.2f}x "
               f"[{r['ratio_min']:.2f}, {r['ratio_max']:.2f}] -> {'met' if r['ratio_median'] >= GOAL else 'NOT met'}")
