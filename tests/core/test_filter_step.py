@@ -5,9 +5,9 @@
   equals predict then update bit for bit: the posterior, y, S, NIS, log-likelihood and t_ns;
 - the paths it hands to the two calls give what the two calls give: a nonlinear motion model,
   a model without a compiled twin, z as a list, a control input;
-- it refuses what the two calls refuse, with the same error class and message: z with NaN or of
-  the wrong length, R asymmetric, a time step backwards, a non-finite prediction (check on
-  only), a nonlinear measurement model in the KF (after predict's own checks).
+- it refuses what the two calls refuse, with the same error class and message: a time step
+  backwards, a non-finite prediction (check on only), a nonlinear measurement model in the KF
+  (after predict's own checks); bad z and R: tests/core/test_step_kernels.py, beside update.
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ from fusion.core.kalman import ExtendedKalmanFilter, KalmanFilter
 from fusion.core.measurement import CartesianPosition
 from fusion.core.motion import ConstantVelocity, CoordinatedTurn
 from fusion.core.radar import Radar2D
-from fusion.errors import ConfigError, NonFiniteError, NotPositiveDefiniteError, NumericalError, ShapeError, TimeError
+from fusion.errors import ConfigError, NumericalError, TimeError
 
 NAN = float("nan")
 SEEDS = (0, 1)
@@ -92,28 +92,6 @@ def test_handed_to_the_two_calls() -> None:
     _same(kf.step(s4, DT_NS, [1000.0, 0.5], cart), kf.update(kf.predict(s4, DT_NS), [1000.0, 0.5], cart))
     with pytest.raises(ConfigError, match="takes no control input"):
         kf.step(s4, DT_NS, np.array([1000.0, 0.5]), cart, u=[1.0, 1.0])
-
-
-REFUSED = {
-    "z_nan": (np.array([1000.0, NAN]), None, NonFiniteError, "z holds NaN or inf"),
-    "z_short": (np.array([1000.0]), None, ShapeError, "z must have length 2"),
-    "R_asym": (np.array([1000.0, 0.0]), np.array([[1.0, 0.5], [0.0, 1.0]]), NotPositiveDefiniteError,
-               "R is not symmetric"),
-    "R_shape": (np.array([1000.0, 0.0]), np.eye(3), ShapeError, r"R must have shape \(2, 2\)"),
-}
-
-
-@pytest.mark.parametrize("model", ("cart", "radar"), ids=("cart", "radar"))
-@pytest.mark.parametrize("case", list(REFUSED), ids=list(REFUSED))
-def test_step_refuses_what_update_refuses(case: str, model: str) -> None:
-    z, R, err, match = REFUSED[case]
-    meas = CartesianPosition(ndim_state=4, indices=(0, 2), R=[1.0, 1.0]) if model == "cart" else Radar2D(R=[1.0, 1e-4])
-    ekf = ExtendedKalmanFilter(ConstantVelocity(ndim=2, q=1.0))
-    st = GaussianState.create([1000.0, 0.0, 10.0, 0.0], np.eye(4))
-    with pytest.raises(err, match=match):
-        ekf.update(ekf.predict(st, DT_NS), z, meas, R=R)
-    with pytest.raises(err, match=match):
-        ekf.step(st, DT_NS, z, meas, R=R)
 
 
 def test_step_refuses_time_nonfinite_and_nonlinear() -> None:
