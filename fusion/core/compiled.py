@@ -34,7 +34,15 @@ def predict_into(x: np.ndarray, P: np.ndarray, F: np.ndarray, Q: np.ndarray,
                  xn: np.ndarray, Pn: np.ndarray) -> bool:
     """x- = F x into xn, P- = F P F' + Q into Pn; returns whether every component of xn is finite."""
     n = x.shape[0]
-    FP = np.empty((n, n))
+    return predict_work(x, P, F, Q, xn, Pn, np.empty(n * n))
+
+
+@njit(cache=True, fastmath=False)
+def predict_work(x: np.ndarray, P: np.ndarray, F: np.ndarray, Q: np.ndarray,
+                 xn: np.ndarray, Pn: np.ndarray, FP: np.ndarray) -> bool:
+    """`predict_into` with the product F P in FP (n^2 floats, row-major, overwritten; nothing is
+    allocated)."""
+    n = x.shape[0]
     finite = True
     for i in range(n):
         s = 0.0
@@ -46,12 +54,12 @@ def predict_into(x: np.ndarray, P: np.ndarray, F: np.ndarray, Q: np.ndarray,
             s = 0.0
             for k in range(n):
                 s += F[i, k] * P[k, j]
-            FP[i, j] = s
+            FP[i * n + j] = s
     for i in range(n):
         for j in range(n):
             s = 0.0
             for k in range(n):
-                s += FP[i, k] * F[j, k]
+                s += FP[i * n + k] * F[j, k]
             Pn[i, j] = s + Q[i, j]
     return finite
 
@@ -98,76 +106,101 @@ def update_into(x: np.ndarray, P: np.ndarray, y: np.ndarray, H: np.ndarray, R: n
 
     ok is False (and xn, Pn unwritten) when S is not positive definite; S is filled either way.
     """
+    m, n = y.shape[0], x.shape[0]
+    return update_work(x, P, y, H, R, xn, Pn, S, np.empty(update_work_size(n, m)))
+
+
+@njit(cache=True, fastmath=False)
+def update_work_size(n: int, m: int) -> int:
+    """The scratch `update_work` needs for an n-state and an m-measurement: 4 m n + m^2 + m."""
+    return 4 * m * n + m * m + m
+
+
+@njit(cache=True, fastmath=False)
+def update_work(x: np.ndarray, P: np.ndarray, y: np.ndarray, H: np.ndarray, R: np.ndarray,
+                xn: np.ndarray, Pn: np.ndarray, S: np.ndarray, work: np.ndarray) -> tuple[bool, float, float]:
+    """`update_into` with its intermediates in `work` (at least update_work_size(n, m) floats,
+    overwritten; nothing is allocated). The intermediates are indexed flat (a reshape in a
+    kernel costs more than this 4x4 arithmetic), row-major at these offsets:
+    H P (m, n) at 0, W = L^-1 H P (m, n) at mn, K' = L'^-1 W (m, n) at 2 mn, K S (n, m) at
+    3 mn, L (m, m, lower triangle; cholesky_into's arithmetic) at 4 mn, w = L^-1 y after it."""
     n = x.shape[0]
     m = y.shape[0]
     mn = m * n
-    work = np.empty(4 * mn + m * m + m)  # one allocation for every intermediate
-    HP = work[:mn].reshape((m, n))  # H P (= (P H')')
-    W = work[mn:2 * mn].reshape((m, n))  # L^-1 H P (forward substitution)
-    Kt = work[2 * mn:3 * mn].reshape((m, n))  # L'^-1 W = S^-1 H P (back substitution)
-    KS = work[3 * mn:4 * mn].reshape((n, m))  # K S
-    L = work[4 * mn:4 * mn + m * m].reshape((m, m))  # lower triangle only is written and read
-    w = work[4 * mn + m * m:]  # L^-1 y
+    W, Kt, KS, L = mn, 2 * mn, 3 * mn, 4 * mn
+    w = L + m * m
     for i in range(m):
         for j in range(n):
             s = 0.0
             for k in range(n):
                 s += H[i, k] * P[k, j]
-            HP[i, j] = s
+            work[i * n + j] = s
     for i in range(m):
         for j in range(m):
             s = 0.0
             for k in range(n):
-                s += HP[i, k] * H[j, k]
+                s += work[i * n + k] * H[j, k]
             S[i, j] = s + R[i, j]
     for i in range(m):
         for j in range(i):
             a = 0.5 * (S[i, j] + S[j, i])
             S[i, j] = a
             S[j, i] = a
-    if not cholesky_into(S, L):
-        return False, 0.0, 0.0
+    for j in range(m):  # S = L L' (cholesky_into, flat)
+        d = S[j, j]
+        for k in range(j):
+            d -= work[L + j * m + k] * work[L + j * m + k]
+        if not d > 0.0:
+            return False, 0.0, 0.0
+        work[L + j * m + j] = math.sqrt(d)
+        for i in range(j + 1, m):
+            s = S[i, j]
+            for k in range(j):
+                s -= work[L + i * m + k] * work[L + j * m + k]
+            work[L + i * m + j] = s / work[L + j * m + j]
     for i in range(m):
+        lii = work[L + i * m + i]
         for j in range(n):
-            s = HP[i, j]
+            s = work[i * n + j]
             for k in range(i):
-                s -= L[i, k] * W[k, j]
-            W[i, j] = s / L[i, i]
+                s -= work[L + i * m + k] * work[W + k * n + j]
+            work[W + i * n + j] = s / lii
         s = y[i]
         for k in range(i):
-            s -= L[i, k] * w[k]
-        w[i] = s / L[i, i]
+            s -= work[L + i * m + k] * work[w + k]
+        work[w + i] = s / lii
     for i in range(m - 1, -1, -1):
+        lii = work[L + i * m + i]
         for j in range(n):
-            s = W[i, j]
+            s = work[W + i * n + j]
             for k in range(i + 1, m):
-                s -= L[k, i] * Kt[k, j]
-            Kt[i, j] = s / L[i, i]
+                s -= work[L + k * m + i] * work[Kt + k * n + j]
+            work[Kt + i * n + j] = s / lii
     nis = 0.0
     logdet = 0.0
     for i in range(m):
-        nis += w[i] * w[i]
-        logdet += 2.0 * math.log(L[i, i])
+        nis += work[w + i] * work[w + i]
+        logdet += 2.0 * math.log(work[L + i * m + i])
     for i in range(n):
         s = x[i]
         for k in range(m):
-            s += Kt[k, i] * y[k]
+            s += work[Kt + k * n + i] * y[k]
         xn[i] = s
     for i in range(n):
         for j in range(m):
             s = 0.0
             for k in range(m):
-                s += Kt[k, i] * S[k, j]
-            KS[i, j] = s
+                s += work[Kt + k * n + i] * S[k, j]
+            work[KS + i * m + j] = s
     for i in range(n):
         for j in range(n):
             a_ij = 0.0  # (K H P)[i, j]
             a_ji = 0.0
             ksk = 0.0
             for k in range(m):
-                a_ij += Kt[k, i] * HP[k, j]
-                a_ji += Kt[k, j] * HP[k, i]
-                ksk += KS[i, k] * Kt[k, j]
+                a_ij += work[Kt + k * n + i] * work[k * n + j]
+                a_ji += work[Kt + k * n + j] * work[k * n + i]
+                ksk += work[KS + i * m + k] * work[Kt + k * n + j]
             Pn[i, j] = P[i, j] - a_ij - a_ji + ksk
     for i in range(n):
         for j in range(i):

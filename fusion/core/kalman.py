@@ -17,9 +17,15 @@ one compiled call that also evaluates h, H, the wrapped residual and the checks 
 given R (fusion.core.compiled_step). What that call refuses goes the numpy way (h, jacobian,
 residual, fusion.core.checks), which raises the typed error, so errors and messages are those of
 the numpy path; results agree with it to rounding (tests/core/test_step_kernels.py).
+`step(state, t_ns, z, model)` is predict then update in one compiled call
+(fusion.core.compiled_step.step_model): the same Update bit for bit, the same errors
+(tests/core/test_filter_step.py), one numba dispatch and one predicted state fewer. The
+compiled calls keep their intermediates in a scratch array the filter owns (no allocation in
+the kernels); every array returned is fresh.
 `predict_arrays` and `update_arrays` are a plain numpy reference of the equations above,
-broadcast over leading dimensions, with the product Joseph form; the tracker does not call them (tests/core/test_kernels.py checks the compiled kernels
-against them, bench/core_step.py times them). They agree to rounding.
+broadcast over leading dimensions, with the product Joseph form; the tracker does not call them
+(tests/core/test_kernels.py checks the compiled kernels against them, bench/core_step.py times
+them). They agree to rounding.
 """
 
 from __future__ import annotations
@@ -43,7 +49,7 @@ LOG_2PI = math.log(2.0 * math.pi)
 _F64 = np.dtype(np.float64)
 _empty = np.empty
 _ndarray = np.ndarray
-_predict_fq, _update_model = _step.predict_fq, _step.update_model
+_predict_fq, _update_model, _step_model = _step.predict_fq, _step.update_model, _step.step_model
 _NONFINITE, _CHECK_Z, _CHECK_R = _step.NONFINITE, _step.CHECK_Z, _step.CHECK_R
 _new = tuple.__new__  # GaussianState and Update are named tuples: built without their __new__
 
@@ -193,7 +199,11 @@ class ExtendedKalmanFilter(FilterBase):
         super().__init__(motion, check=check)
         self._transitions = TransitionCache(motion) if motion.is_linear and isinstance(
             motion, LinearMotionModel) else None
-        self._n, self._nn = motion.ndim_state, (motion.ndim_state, motion.ndim_state)
+        n = motion.ndim_state
+        self._n, self._nn = n, (n, n)
+        # Scratch of the compiled calls (measurements up to n + 2 components; a larger one takes
+        # the numpy path): only ever read inside one call, which holds the GIL.
+        self._ws = np.empty(_step.work_size(n, n + 2))
 
     def predict(self, state: GaussianState, t_ns: int, *, u: ArrayLike | None = None) -> GaussianState:
         """Predict to t_ns (>= state.t_ns); u is the control input if the model takes one."""
@@ -203,10 +213,38 @@ class ExtendedKalmanFilter(FilterBase):
         cache = self._transitions
         if cache is not None and u is None:
             x, P = _empty(self._n), _empty(self._nn)
-            status = _predict_fq(state.x, state.P, cache[dt], x, P)
+            status = _predict_fq(state.x, state.P, cache[dt], x, P, self._ws)
             if status == 0 or (status == _NONFINITE and not self.check):
                 return _new(GaussianState, (x, P, t))
         return self._predict_numpy(state, t, dt, u)
+
+    def step(self, state: GaussianState, t_ns: int, z: ArrayLike, model: MeasurementModel, *,
+             R: ArrayLike | None = None, u: ArrayLike | None = None) -> Update:
+        """Predict to t_ns, then fold z (taken at t_ns) in: update(predict(state, t_ns, u=u), z,
+        model, R=R), the same Update bit for bit and the same errors.
+
+        A linear motion model and a model with a compiled twin, z and R float64 arrays, no u: one
+        compiled call (fusion.core.compiled_step.step_model) instead of two; anything else, or
+        anything that call refuses, is the two calls.
+        """
+        kind = model.kernel_kind
+        cache = self._transitions
+        if kind and cache is not None and u is None and type(z) is _ndarray and z.dtype is _F64 and (
+                z.ndim == 1) and (R is None or (type(R) is _ndarray and R.dtype is _F64 and R.ndim == 2)):
+            t = int(t_ns)
+            d = t - int(state.t_ns)
+            if d >= 0:
+                n, m = self._n, model.ndim_meas
+                xn, Pn, y, S = _empty(n), _empty(self._nn), _empty(m), _empty((m, m))
+                if R is None:
+                    Ru, code = model.R, (kind << 2 | _CHECK_Z if self.check else kind << 2)
+                else:
+                    Ru, code = R, (kind << 2 | _CHECK_Z | _CHECK_R if self.check else kind << 2)
+                status, nis, ll = _step_model(code, state.x, state.P, cache[d / NS_PER_S], z, model.kernel_spec,
+                                              Ru, xn, Pn, y, S, self._ws)
+                if status == 0:
+                    return _new(Update, (_new(GaussianState, (xn, Pn, t)), y, S, nis, ll))
+        return self.update(self.predict(state, t_ns, u=u), z, model, R=R)
 
     def _predict_numpy(self, state: GaussianState, t_ns: int, dt: float, u: ArrayLike | None) -> GaussianState:
         m = self._motion
@@ -229,10 +267,10 @@ class ExtendedKalmanFilter(FilterBase):
             n, m = x.shape[0], model.ndim_meas
             xn, Pn, y, S = _empty(n), _empty((n, n)), _empty(m), _empty((m, m))
             if R is None:
-                Ru, flags = model.R, (_CHECK_Z if self.check else 0)
+                Ru, code = model.R, (kind << 2 | _CHECK_Z if self.check else kind << 2)
             else:
-                Ru, flags = R, (_CHECK_Z | _CHECK_R if self.check else 0)
-            status, nis, ll = _update_model(kind, x, state.P, z, model.kernel_spec, Ru, flags, xn, Pn, y, S)
+                Ru, code = R, (kind << 2 | _CHECK_Z | _CHECK_R if self.check else kind << 2)
+            status, nis, ll = _update_model(code, x, state.P, z, model.kernel_spec, Ru, xn, Pn, y, S, self._ws)
             if status == 0:
                 return _new(Update, (_new(GaussianState, (xn, Pn, state.t_ns)), y, S, nis, ll))
         return self._update_numpy(state, z, model, R)
@@ -263,3 +301,9 @@ class KalmanFilter(ExtendedKalmanFilter):
                 "use ExtendedKalmanFilter or UnscentedKalmanFilter"
             )
         return ExtendedKalmanFilter.update(self, state, z, model, R=R)
+
+    def step(self, state: GaussianState, t_ns: int, z: ArrayLike, model: MeasurementModel, *,
+             R: ArrayLike | None = None, u: ArrayLike | None = None) -> Update:
+        if not model.is_linear:  # the two calls, which refuse it (after predict's own checks)
+            return self.update(self.predict(state, t_ns, u=u), z, model, R=R)
+        return ExtendedKalmanFilter.step(self, state, t_ns, z, model, R=R, u=u)

@@ -7,7 +7,7 @@
 - predict: equals the numpy reference predict_arrays for every linear model, over many dt;
 - the checks still refuse what they refused, with the same error class and message: NaN or
   inf in z, z of the wrong length, R asymmetric, not positive definite or non-finite, and a
-  state whose S is not positive definite;
+  state whose S is not positive definite; update and the fused step alike;
 - the angle wrap of the kernel is wrap_angle_scalar, at the +-pi edge too;
 - the F, Q cache holds read-only copies and stays bounded.
 """
@@ -162,6 +162,8 @@ def test_checks_refuse_on_the_compiled_path(case: str, model: str) -> None:
     st = GaussianState.create([1000.0, 0.0, 10.0, 0.0], np.eye(4))
     with pytest.raises(err, match=match):
         ekf.update(st, z, meas, R=R)
+    with pytest.raises(err, match=match):  # the fused step (tests/core/test_filter_step.py) too
+        ekf.step(st, 1_000_000, z, meas, R=R)
 
 
 def test_S_not_positive_definite_is_numerical_error() -> None:
