@@ -74,32 +74,34 @@ class Rows:
         return s
 
     # ---- one flush -------------------------------------------------------------------------------
-    def score(self, est: list[tuple[Estimate, int, int]], sink: Any) -> _Stacked | None:
-        """The record/estimates rows of a record flush's estimates, scored against the truth at
+    def score(self, E: list[Estimate], t: Array, arr: Array, step: Array, sink: Any) -> _Stacked | None:
+        """The record/estimates rows of a record flush's estimates (E, with their times t, arrival
+        times and steps, int64 arrays), scored against the truth at
         their times (retractions as NaN rows), the trails (world/estimates, world/tentative) and
         OSPA/GOSPA; picks the viewed tracks (the first MAX_VIEWED confirmed ones, in row order) and
         widens the scene's extent. Returns the viewed tracks' confirmed rows, stacked, for `views`
         (None if none): what is kept until the view flush is bounded by the viewed tracks, not
         by the number of tracks."""
-        retracted = [r for r in est if r[0].status == "retracted"]
-        live = [r for r in est if r[0].status != "retracted"]
+        if not E:
+            return None
         rec = sink.col("record/estimates", "record")
         d = len(self.layout)
-        if retracted:  # x, std, error: NaN rows
-            E_r = [r[0] for r in retracted]
+        ret = np.fromiter((e.status == "retracted" for e in E), dtype=bool, count=len(E))
+        if ret.any():  # x, std, error: NaN rows
+            E_r = [E[i] for i in np.flatnonzero(ret).tolist()]
             nan = np.full((len(E_r), d), np.nan)
             ids_r = [e.track_id for e in E_r]
-            rec.extend([e.t_ns for e in E_r], [r[2] for r in retracted], [r[1] for r in retracted],
+            rec.extend(t[ret], step[ret], arr[ret],
                        blocks={"x": nan, "std": nan, "error": nan}, track=ids_r, label=[short_id(i) for i in ids_r],
                        sensor=[e.sensor_id for e in E_r], seq=[e.seq for e in E_r], status=[e.status for e in E_r],
                        revision=[e.revision for e in E_r], nis=[np.nan] * len(E_r), nis_dof=[0] * len(E_r),
                        nees=[np.nan] * len(E_r), nees_dof=[0] * len(E_r), target=[""] * len(E_r))
-        if not live:
-            return None
-        E_ = [r[0] for r in live]
-        t = np.array([e.t_ns for e in E_], dtype=np.int64)
-        arr = np.array([r[1] for r in live], dtype=np.int64)
-        step = np.array([r[2] for r in live], dtype=np.int64)
+            if ret.all():
+                return None
+            E_ = [E[i] for i in np.flatnonzero(~ret).tolist()]
+            t, arr, step = t[~ret], arr[~ret], step[~ret]
+        else:
+            E_ = E
         X = np.array([e.x for e in E_], dtype=np.float64)
         P = np.array([e.P for e in E_], dtype=np.float64)
         std = np.sqrt(np.clip(np.diagonal(P, axis1=1, axis2=2), 0.0, None))
