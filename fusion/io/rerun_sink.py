@@ -51,7 +51,7 @@ import pyarrow as pa
 
 from fusion.core.checks import Array
 from fusion.io import blueprint, track_rows
-from fusion.io.columns import Column, Ragged, components, time_column
+from fusion.io.columns import Column, Ragged, components, stack, time_column
 from fusion.io.derive import world
 from fusion.io.labels import is_epoch, short_id
 from fusion.io.palette import colour
@@ -260,7 +260,7 @@ class RerunSink:
             used = np.fromiter(((s << 64) | (m.seq & _SEQ_MASK) in keys for s, m in zip(steps_m, ms_, strict=True)),
                                dtype=bool, count=len(ms_))[order]
             step_m, t_m = step_m[order], t_m[order]
-            P = world(np.array([m.position for m in ms_], dtype=np.float64)[order])
+            P = world(stack([m.position for m in ms_])[order])  # one sensor: one shape
             first = np.flatnonzero(np.r_[True, (step_m[1:] != step_m[:-1]) | (t_m[1:] != t_m[:-1])])
             lens = np.diff(np.r_[first, len(ms_)])
             t_r = t_m[first]
