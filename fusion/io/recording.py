@@ -45,10 +45,10 @@ class RotatingSink:
         stamp = time.strftime("%Y%m%dT%H%M%S", time.gmtime(now))
         path = self.directory / f"{self.prefix}-{stamp}-{len(self.files):04d}.rrd"
         self._opened = now
-        self._sized_at = -1  # the sink's flush count when its file's size was last looked at
         self.files.append(path)
         self.steps_per_file.append(0)
         sink = RerunSink(path, recording_id=path.stem, **self._kw)  # type: ignore[arg-type]
+        self._sized_at = sink.flushes  # the sink's flush count when its file's size was last looked at
         if getattr(self, "sink", None) is not None:
             sink.continue_from(self.sink)  # scoring, viewed tracks and time axes continue across the boundary
         return sink
