@@ -96,10 +96,13 @@ class Column:
         return int(c[0][0]), int(c[2][0])
 
     def field(self, name: str) -> Array | list[Any]:
-        """Every row's value of a field: one array when every chunk is an array of the same
-        trailing shape, else a list with one item per row."""
+        """Every row's value of a field: one arrow array when every chunk is one (lists of labels),
+        one numpy array when every chunk is an array of the same trailing shape, else a list with
+        one item per row."""
         self._seal()
         parts = [c[3][name] for c in self.chunks]
+        if all(isinstance(p, pa.Array) for p in parts):  # built as arrow already (lists of labels)
+            return pa.concat_arrays(parts) if len(parts) > 1 else parts[0]
         if all(isinstance(p, np.ndarray) for p in parts) and len({p.shape[1:] for p in parts}) == 1:
             return np.concatenate(parts) if len(parts) > 1 else parts[0]
         out: list[Any] = []
@@ -128,6 +131,16 @@ class Column:
                 flats.append(np.concatenate(blocks) if blocks else np.empty((0, width), dtype=dtype))
                 lens.append(np.array([len(b) for b in blocks], dtype=np.int64))
         return np.concatenate(flats), np.concatenate(lens)
+
+
+def stack(rows: Sequence[Array], shape: tuple[int, ...] | None = None) -> Array:
+    """Equal-shaped arrays (n of them) as one float64 array (n, *shape): one concatenate, then a
+    reshape (np.array over a list of small 2-D arrays cost 0.6-1.8 us per array here, this ~0.15).
+    `shape` is the arrays' shape, needed when there may be none."""
+    if not len(rows):
+        return np.empty((0, *(shape or (0,))), dtype=np.float64)
+    first = np.asarray(rows[0])
+    return np.concatenate(rows).reshape(len(rows), *first.shape).astype(np.float64, copy=False)
 
 
 def time_column(rr: Any, name: str, t_ns: Sequence[int] | Array, *, epoch: bool) -> Any:
@@ -196,6 +209,8 @@ def components(rr: Any, c: Column) -> Any:
 
 def _field(values: Array | list[Any]) -> Any:
     """A record field as an arrow array: float vectors as lists of float64, the rest as given."""
+    if isinstance(values, pa.Array):
+        return values
     if isinstance(values, np.ndarray):
         return pa.array(values)
     first = values[0]

@@ -48,6 +48,7 @@ class RotatingSink:
         self.files.append(path)
         self.steps_per_file.append(0)
         sink = RerunSink(path, recording_id=path.stem, **self._kw)  # type: ignore[arg-type]
+        self._sized_at = sink.flushes  # the sink's flush count when its file's size was last looked at
         if getattr(self, "sink", None) is not None:
             sink.continue_from(self.sink)  # scoring, viewed tracks and time axes continue across the boundary
         return sink
@@ -68,8 +69,14 @@ class RotatingSink:
         self.sink.log_text(t_ns, text, level)
 
     def _maybe_rotate(self) -> None:
+        """Past rotate_s, or past rotate_bytes: the file grows only when the sink writes (a flush),
+        so its size is looked at once after each flush, not at every step (a stat per step was
+        ~1-2 us per measurement at 10 targets)."""
         too_old = self._clock() - self._opened >= self.rotate_s
-        too_big = self.sink.path.exists() and self.sink.path.stat().st_size >= self.rotate_bytes
+        too_big = False
+        if self.sink.flushes != self._sized_at:
+            self._sized_at = self.sink.flushes
+            too_big = self.sink.path.exists() and self.sink.path.stat().st_size >= self.rotate_bytes
         if too_old or too_big:
             old = self.sink
             old.close()

@@ -47,10 +47,11 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import pyarrow as pa
 
 from fusion.core.checks import Array
 from fusion.io import blueprint, track_rows
-from fusion.io.columns import Column, components, time_column
+from fusion.io.columns import Column, Ragged, components, stack, time_column
 from fusion.io.derive import world
 from fusion.io.labels import is_epoch, short_id
 from fusion.io.palette import colour
@@ -69,6 +70,7 @@ TRUTH_WAIT_NS = 2_000_000_000
 # ~10 us per measurement at 1000 measurements/s. The record is written every flush_interval_s.
 VIEW_INTERVAL_S = 15.0
 _USED = (Outcome.UPDATED,)  # a measurement that started a track is not drawn as associated
+_SEQ_MASK = (1 << 64) - 1
 _RGBA_USED = np.array(colour("associated"), dtype=np.uint8)
 _RGBA_CLUTTER = np.array(colour("clutter"), dtype=np.uint8)
 
@@ -93,7 +95,11 @@ class RerunSink:
         self.rows = track_rows.Rows(layout, list(position_indices), list(velocity_indices))
         self.ndim = len(position_indices)
         self._cols: dict[str, Column] = {}
-        self._est: list[tuple[Estimate, int, int]] = []
+        # estimates kept for scoring, as parallel lists: the estimate, its arrival (or t_ns), its step
+        self._est: tuple[list[Estimate], list[int], list[int]] = ([], [], [])
+        self._est_steps: list[tuple[tuple[Estimate, ...], int, int | None]] = []  # (estimates, step, arrival)
+        self._steps: list[tuple[tuple, tuple, int, int | None]] = []  # (measurements, associations, step, arrival)
+        self.flushes = 0  # flushes so far (fusion.io.recording looks at the file's size after each)
         self._truth_rows: list[tuple[int, int, Array, str]] = []
         self._scored: list[Any] = []  # the viewed tracks' rows (track_rows._Stacked) since the last view flush
         self._pending = 0
@@ -174,34 +180,19 @@ class RerunSink:
 
     def log_step(self, result: StepResult, *, arrival_ns: int | None = None) -> None:
         """One Tracker.process result: measurements and their associations, estimates, events,
-        replays and refusals."""
+        replays and refusals. The result's measurements, associations and estimates are kept as
+        they are (a few Python operations per step, whatever their number) and turned into rows
+        at the next flush, for all the steps since the last one at once (`_rows_of_steps`)."""
         self._step += 1
         step = self._step
-        outcome = {(a.sensor_id, a.seq): a for a in result.associations}
-        scans: dict[tuple[str, int], list] = {}
-        for m in result.measurements:
-            scans.setdefault((m.sensor_id, m.t_ns), []).append(m)
-        for (sensor_id, t_ns), ms in sorted(scans.items()):
-            used = np.array([(a := outcome.get((m.sensor_id, m.seq))) is not None and a.outcome in _USED for m in ms])
-            rgba = np.where(used[:, None], _RGBA_USED, _RGBA_CLUTTER).astype(np.uint8)
-            arr = t_ns if arrival_ns is None else arrival_ns
-            self.col(f"world/meas/{sensor_id}", "points", radius=-1.75).add(
-                t_ns, step, arr, p=world(np.array([m.position for m in ms], dtype=np.float64)), rgba=rgba)
-            self._pending += 1
-        A = result.associations
-        if A:
-            t_a = [a.t_ns for a in A]
-            self.col("record/associations", "record").extend(
-                t_a, [step] * len(A), t_a if arrival_ns is None else [arrival_ns] * len(A),
-                sensor=[a.sensor_id for a in A], seq=[a.seq for a in A], outcome=[a.outcome.value for a in A],
-                label=["" if a.track_id is None else short_id(a.track_id) for a in A],
-                gated=[[short_id(g) for g in a.gated] for a in A],
-                nis=[np.nan if a.nis is None else float(a.nis) for a in A])
-            self._pending += len(A)
-        for e in result.estimates:
-            self._est.append((e, e.t_ns if arrival_ns is None else arrival_ns, step))
-            self._newest_t = max(self._newest_t, e.t_ns)
-        self._pending += len(result.estimates)
+        ms, A, E = result.measurements, result.associations, result.estimates
+        if ms or A:
+            self._steps.append((ms, A, step, arrival_ns))
+            # the rows they will make, as counted towards flush_rows: one per scan, one per association
+            self._pending += (len({(m.sensor_id, m.t_ns) for m in ms}) if ms else 0) + len(A)
+        if E:
+            self._est_steps.append((E, step, arrival_ns))
+            self._pending += len(E)
         for ev in result.events:
             why = "" if ev.reason is None else ev.reason.value
             text = f"track {short_id(ev.track_id)} " + ("withdrawn " if ev.retracted else "") + ev.kind.value
@@ -215,6 +206,69 @@ class RerunSink:
             self._event(r.t_ns, "refused", None, r.reason.value, False,
                         f"refused {r.sensor_id}#{r.seq}: {r.reason.value}: {r.detail}", "WARN")
         self.maybe_flush()
+
+    def _rows_of_steps(self) -> None:
+        """The rows of the steps logged since the last flush: every accepted association (one
+        record/associations block), the measured points (one row per step, sensor and scan
+        time, coloured by the association's outcome in that step), and the estimates kept for
+        scoring (self._est: estimates, arrivals (or their t_ns), steps)."""
+        kept_E, kept_arr, kept_step = self._est
+        for E, step, arrival_ns in self._est_steps:
+            kept_E.extend(E)
+            kept_step.extend([step] * len(E))
+            kept_arr.extend([e.t_ns for e in E] if arrival_ns is None else [arrival_ns] * len(E))
+        self._est_steps = []
+        steps, self._steps = self._steps, []
+        if not steps:
+            return
+        A = [a for _, As, _, _ in steps for a in As]
+        if A:
+            step_a = [step for _, As, step, _ in steps for _ in As]
+            t_a = [a.t_ns for a in A]
+            arr_a = [t if arr is None else arr for (_, As, _, arr) in steps for t in [a.t_ns for a in As]]
+            gated = [a.gated for a in A]
+            flat = [short_id(g) for gs in gated for g in gs]
+            offsets = np.zeros(len(A) + 1, dtype=np.int32)
+            np.cumsum([len(gs) for gs in gated], out=offsets[1:])
+            self.col("record/associations", "record").extend(
+                t_a, step_a, arr_a, sensor=[a.sensor_id for a in A], seq=[a.seq for a in A],
+                outcome=[a.outcome.value for a in A],
+                label=["" if a.track_id is None else short_id(a.track_id) for a in A],
+                gated=pa.ListArray.from_arrays(pa.array(offsets), pa.array(flat, pa.string())),
+                nis=[np.nan if a.nis is None else float(a.nis) for a in A])
+        # the measurements an association used (_USED) in their step, per sensor: step << 64 | seq
+        used_keys: dict[str, set[int]] = {}
+        for _, As, step, _ in steps:
+            for a in As:
+                if a.outcome in _USED:
+                    used_keys.setdefault(a.sensor_id, set()).add((step << 64) | (a.seq & _SEQ_MASK))
+        by_sensor: dict[str, tuple[list[int], list[Any], list[int | None]]] = {}
+        for ms, _, step, arr in steps:
+            for m in ms:
+                b = by_sensor.get(m.sensor_id)
+                if b is None:
+                    b = by_sensor[m.sensor_id] = ([], [], [])
+                b[0].append(step)
+                b[1].append(m)
+                b[2].append(arr)
+        for sensor_id in sorted(by_sensor):
+            steps_m, ms_, arrs = by_sensor[sensor_id]
+            step_m = np.array(steps_m, dtype=np.int64)
+            t_m = np.fromiter((m.t_ns for m in ms_), dtype=np.int64, count=len(ms_))
+            order = np.lexsort((t_m, step_m))  # by step, then scan time; stable: a scan's order kept
+            keys = used_keys.get(sensor_id, set())
+            used = np.fromiter(((s << 64) | (m.seq & _SEQ_MASK) in keys for s, m in zip(steps_m, ms_, strict=True)),
+                               dtype=bool, count=len(ms_))[order]
+            step_m, t_m = step_m[order], t_m[order]
+            P = world(stack([m.position for m in ms_])[order])  # one sensor: one shape
+            first = np.flatnonzero(np.r_[True, (step_m[1:] != step_m[:-1]) | (t_m[1:] != t_m[:-1])])
+            lens = np.diff(np.r_[first, len(ms_)])
+            t_r = t_m[first]
+            arr_r = [arrs[i] for i in order[first].tolist()]
+            arr_m = np.array([t if a is None else a for t, a in zip(t_r.tolist(), arr_r, strict=True)], dtype=np.int64)
+            rgba = np.where(used[:, None], _RGBA_USED, _RGBA_CLUTTER).astype(np.uint8)
+            self.col(f"world/meas/{sensor_id}", "points", radius=-1.75).extend(
+                t_r, step_m[first], arr_m, p=Ragged(P, lens), rgba=Ragged(rgba, lens))
 
     # ---- writing ---------------------------------------------------------------------------------
     def maybe_flush(self) -> None:
@@ -241,14 +295,21 @@ class RerunSink:
         counts) are kept as column chunks and the viewed tracks' estimates as stacked arrays,
         derived and written at view flushes only: Rerun's per-entity cost and the per-track
         derivation are paid once per view_interval_s."""
-        est, self._est = self._est, []
+        self._rows_of_steps()
+        E, arr, stp = self._est
+        self._est = ([], [], [])
+        t_est = np.fromiter((e.t_ns for e in E), dtype=np.int64, count=len(E))
+        arr_e, stp_e = np.array(arr, dtype=np.int64), np.array(stp, dtype=np.int64)
+        if len(E):
+            self._newest_t = max(self._newest_t, int(t_est.max()))
         newest = self.rows.newest_truth_ns
-        if not final and newest is not None and est:
-            t_est = np.fromiter((r[0].t_ns for r in est), dtype=np.int64, count=len(est))
+        if not final and newest is not None and len(E):
             wait = (t_est >= newest) & (t_est <= newest + TRUTH_WAIT_NS)
             if wait.any():
-                self._est = [r for r, w in zip(est, wait.tolist(), strict=True) if w]
-                est = [r for r, w in zip(est, wait.tolist(), strict=True) if not w]
+                w = wait.tolist()
+                self._est = ([e for e, k in zip(E, w, strict=True) if k], arr_e[wait].tolist(), stp_e[wait].tolist())
+                E = [e for e, k in zip(E, w, strict=True) if not k]
+                t_est, arr_e, stp_e = t_est[~wait], arr_e[~wait], stp_e[~wait]
         truth, self._truth_rows = self._truth_rows, []
         if truth:
             t_t = [r[0] for r in truth]
@@ -258,7 +319,7 @@ class RerunSink:
             W = world(S[:, self.rows.pi])
             self.col("world/truth", "points", rgba=colour("truth"), radius=-1.5).extend(
                 t_t, [r[1] for r in truth], t_t, p=W[:, None, :])
-        scored = self.rows.score(est, self)
+        scored = self.rows.score(E, t_est, arr_e, stp_e, self)
         if scored is not None:
             self._scored.append(scored)
         if self._counts is not None and self._pending:
@@ -292,6 +353,7 @@ class RerunSink:
             self.rows_written += len(c)
             self._written.add("/" + entity)
         self._pending = 0
+        self.flushes += 1
         if views or len(self._written) != n_written:
             self._send_blueprint()
         self._last_flush = time.monotonic()

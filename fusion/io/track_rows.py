@@ -14,6 +14,7 @@ import numpy as np
 
 from fusion.core.checks import Array
 from fusion.io import derive, gain_groups, trail
+from fusion.io.columns import stack
 from fusion.io.labels import short_id
 from fusion.io.palette import colour, series_colours
 from fusion.tracking.results import Estimate
@@ -74,34 +75,36 @@ class Rows:
         return s
 
     # ---- one flush -------------------------------------------------------------------------------
-    def score(self, est: list[tuple[Estimate, int, int]], sink: Any) -> _Stacked | None:
-        """The record/estimates rows of a record flush's estimates, scored against the truth at
+    def score(self, E: list[Estimate], t: Array, arr: Array, step: Array, sink: Any) -> _Stacked | None:
+        """The record/estimates rows of a record flush's estimates (E, with their times t, arrival
+        times and steps, int64 arrays), scored against the truth at
         their times (retractions as NaN rows), the trails (world/estimates, world/tentative) and
         OSPA/GOSPA; picks the viewed tracks (the first MAX_VIEWED confirmed ones, in row order) and
         widens the scene's extent. Returns the viewed tracks' confirmed rows, stacked, for `views`
         (None if none): what is kept until the view flush is bounded by the viewed tracks, not
         by the number of tracks."""
-        retracted = [r for r in est if r[0].status == "retracted"]
-        live = [r for r in est if r[0].status != "retracted"]
+        if not E:
+            return None
         rec = sink.col("record/estimates", "record")
         d = len(self.layout)
-        if retracted:  # x, std, error: NaN rows
-            E_r = [r[0] for r in retracted]
+        ret = np.fromiter((e.status == "retracted" for e in E), dtype=bool, count=len(E))
+        if ret.any():  # x, std, error: NaN rows
+            E_r = [E[i] for i in np.flatnonzero(ret).tolist()]
             nan = np.full((len(E_r), d), np.nan)
             ids_r = [e.track_id for e in E_r]
-            rec.extend([e.t_ns for e in E_r], [r[2] for r in retracted], [r[1] for r in retracted],
+            rec.extend(t[ret], step[ret], arr[ret],
                        blocks={"x": nan, "std": nan, "error": nan}, track=ids_r, label=[short_id(i) for i in ids_r],
                        sensor=[e.sensor_id for e in E_r], seq=[e.seq for e in E_r], status=[e.status for e in E_r],
                        revision=[e.revision for e in E_r], nis=[np.nan] * len(E_r), nis_dof=[0] * len(E_r),
                        nees=[np.nan] * len(E_r), nees_dof=[0] * len(E_r), target=[""] * len(E_r))
-        if not live:
-            return None
-        E_ = [r[0] for r in live]
-        t = np.array([e.t_ns for e in E_], dtype=np.int64)
-        arr = np.array([r[1] for r in live], dtype=np.int64)
-        step = np.array([r[2] for r in live], dtype=np.int64)
-        X = np.array([e.x for e in E_], dtype=np.float64)
-        P = np.array([e.P for e in E_], dtype=np.float64)
+            if ret.all():
+                return None
+            E_ = [E[i] for i in np.flatnonzero(~ret).tolist()]
+            t, arr, step = t[~ret], arr[~ret], step[~ret]
+        else:
+            E_ = E
+        X = stack([e.x for e in E_])
+        P = stack([e.P for e in E_])
         std = np.sqrt(np.clip(np.diagonal(P, axis1=1, axis2=2), 0.0, None))
         n = len(E_)
         m_idx, TX, targets = derive.match_truth(t, X, P, self.truth, self.pi)
@@ -184,8 +187,7 @@ class Rows:
         lab = self.viewed[tid]
         base = f"tracks/{lab}"
         t, step, arr = c.t[rows], c.step[rows], c.arr[rows]
-        prior = np.array([c.X[r] if e.prior_x is None else e.prior_x for r, e in zip(rows.tolist(), es, strict=True)],
-                         dtype=np.float64)
+        prior = stack([c.X[r] if e.prior_x is None else e.prior_x for r, e in zip(rows.tolist(), es, strict=True)])
         mt = c.matched[rows]
         meas = [k for k, e in enumerate(es) if e.meas_pos is not None]
         meas_pos = np.array([es[k].meas_pos[: len(self.pi)] for k in meas], dtype=np.float64)  # type: ignore[index]
@@ -197,7 +199,8 @@ class Rows:
                 t, step, arr, v=np.column_stack([prior[:, i], c.X[rows, i]]))
             if mt.any():
                 sink.col(f"{base}/position/{ax}/truth", "scalars", width=1, names=["truth"],  # thin: drawn after
-                         colors=[colour("truth")], widths=[1.0]).extend(t[mt], step[mt], arr[mt], v=c.TX[rows][mt][:, i:i + 1])
+                         colors=[colour("truth")], widths=[1.0]).extend(
+                    t[mt], step[mt], arr[mt], v=c.TX[rows][mt][:, i:i + 1])
                 e_ = c.err[rows][mt][:, i]
                 s_ = 2.0 * c.std[rows][mt][:, i]
                 sink.col(f"{base}/error/{ax}", "scalars", width=3, names=["error", "+2 sigma", "-2 sigma"],
@@ -229,8 +232,8 @@ class Rows:
                 by_sensor[e.sensor_id].append(k)
         for sensor, ks in sorted(by_sensor.items()):
             sel = np.array(ks)
-            Y = np.array([es[k].y for k in ks], dtype=np.float64)  # type: ignore[misc]
-            S = np.array([es[k].S for k in ks], dtype=np.float64)  # type: ignore[misc]
+            Y = stack([es[k].y for k in ks])  # type: ignore[misc]
+            S = stack([es[k].S for k in ks])  # type: ignore[misc]
             m = Y.shape[1]
             lo, hi = derive.chi2_bounds(m)
             nis = np.array([es[k].nis for k in ks], dtype=np.float64)
@@ -243,12 +246,14 @@ class Rows:
             sink.col(f"{base}/innovation/{sensor}", "scalars", width=3 * m, names=names,
                      colors=series_colours(m) + [colour("bound")] * 2 * m).extend(
                 t[sel], step[sel], arr[sel], v=np.concatenate([Y, s2, -s2], axis=1))
-            kg = [k for k in ks if es[k].H is not None and es[k].prior_P is not None]
-            if kg:
-                gs = np.array(kg)
-                H = np.array([es[k].H for k in kg], dtype=np.float64)  # type: ignore[misc]
-                Pm = np.array([es[k].prior_P for k in kg], dtype=np.float64)  # type: ignore[misc]
-                Sg = np.array([es[k].S for k in kg], dtype=np.float64)  # type: ignore[misc]
+            has_k = np.fromiter((es[k].H is not None and es[k].prior_P is not None for k in ks), dtype=bool,
+                                count=len(ks))
+            if has_k.any():
+                kg = [k for k, h in zip(ks, has_k.tolist(), strict=True) if h]
+                gs = sel[has_k]
+                H = stack([es[k].H for k in kg])  # type: ignore[misc]
+                Pm = stack([es[k].prior_P for k in kg])  # type: ignore[misc]
+                Sg = S[has_k]  # the same S, already stacked
                 K = np.swapaxes(np.linalg.solve(Sg, H @ Pm), 1, 2)  # P- H' S^-1, S symmetric
                 # one scale per unit; a sink without the description (bench/recording_cost.py loads
                 # main's sink beside this module) gets the unsplit gain
@@ -261,7 +266,7 @@ class Rows:
                                                               v=K[:, :, cols].reshape(len(kg), -1))
         mk = [k for k, e in enumerate(es) if e.mode_probabilities is not None]
         if mk:
-            mu = np.array([es[k].mode_probabilities for k in mk], dtype=np.float64)  # type: ignore[misc]
+            mu = stack([es[k].mode_probabilities for k in mk])  # type: ignore[misc]
             sel = np.array(mk)
             sink.col(f"{base}/mode", "scalars", width=mu.shape[1], names=_mode_names(sink.mode_names, mu.shape[1]),
                      colors=series_colours(mu.shape[1])).extend(t[sel], step[sel], arr[sel], v=mu)
