@@ -33,7 +33,7 @@ from fusion.core.association import coarse_pairs
 from fusion.core.checks import Array
 from fusion.tracking.detection import Detection
 from fusion.tracking.results import Association, EventKind, Outcome, ScanKey
-from fusion.tracking.scan import ScanContext, ScanOutcome, Tally, measured_points, run_scan
+from fusion.tracking.scan import Coarse, ScanContext, ScanOutcome, Tally, measured_points, run_scan
 from fusion.tracking.trackset import TrackSet, member
 
 
@@ -126,15 +126,15 @@ def _new_gates(ts: TrackSet, changed: np.ndarray, old_gates: Gates, points: tupl
     mpos, mvar = points
     keep = member(old_gates.ids, ts.ids[~changed])
     ids, sq = [old_gates.ids[keep]], [old_gates.seqs[keep]]
-    if changed.any() or new.any():
-        tpos, tvar = ts.predicted_position(t_ns, ctx.q2)
-        ch, nj = np.flatnonzero(changed), np.flatnonzero(new)
-        ci, cj = coarse_pairs(tpos[ch], tvar[ch], mpos, mvar, k=ctx.coarse_k)
+    ch, nj = np.flatnonzero(changed), np.flatnonzero(new)
+    if ch.size:
+        ci, cj = coarse_pairs(*ts.predicted_position(t_ns, ctx.q2, ch), mpos, mvar, k=ctx.coarse_k)
         ids.append(ts.ids[ch[ci]])
         sq.append(seqs[cj])
-        if nj.size:
-            un = np.flatnonzero(~changed)
-            ci, cj = coarse_pairs(tpos[un], tvar[un], mpos[nj], mvar[nj], k=ctx.coarse_k)
+    if nj.size:
+        un = np.flatnonzero(~changed)
+        if un.size:
+            ci, cj = coarse_pairs(*ts.predicted_position(t_ns, ctx.q2, un), mpos[nj], mvar[nj], k=ctx.coarse_k)
             ids.append(ts.ids[un[ci]])
             sq.append(seqs[nj[cj]])
     return Gates(np.concatenate(ids), np.concatenate(sq), mpos, mvar)
@@ -154,6 +154,18 @@ def _reach(seed_ids: np.ndarray, seed_seqs: np.ndarray, old_gates: Gates, new_ga
         if more_ids.size == hot_ids.size and more_seqs.size == hot_seqs.size:
             return hot_ids, hot_seqs
         hot_ids, hot_seqs = more_ids, more_seqs
+
+
+def _sub_coarse(ids: np.ndarray, sub_seqs: np.ndarray, js: np.ndarray, gates: Gates) -> Coarse:
+    """The coarse gate of the re-run part (tracks `ids`, detections `sub_seqs` = positions js):
+    the pairs of `gates` among them, as indices of the part sorted by (detection, track), as
+    coarse_pairs on the part gives them (the reach is closed under the pairs: a pair with one
+    end in it has both)."""
+    inside = member(gates.ids, ids)
+    i = _lookup(ids, gates.ids[inside])[0]
+    j = np.searchsorted(sub_seqs, gates.seqs[inside])
+    o = np.lexsort((i, j))
+    return Coarse(i[o].astype(np.intp), j[o].astype(np.intp), gates.mpos[js], gates.mvar[js])
 
 
 def _tally_of(assoc: list[Association], events: list, *, skips: int = 0) -> Counter:
@@ -207,7 +219,8 @@ def rerun(ts: TrackSet, key: ScanKey, dets: tuple[Detection, ...], ctx: ScanCont
     if rows.size == len(ts) and js.size == len(dets):
         return None  # everything is reached: the whole scan is the same work
     sub_dets = tuple(dets[j] for j in js.tolist())
-    sub = run_scan(ts.take(rows), key, sub_dets, ctx) if rows.size or js.size else None
+    sub = run_scan(ts.take(rows), key, sub_dets, ctx, _sub_coarse(ts.ids[rows], seqs[js], js, new_gates)) \
+        if rows.size or js.size else None
     if sub is not None and (sub.tally[Tally.BIRTHS_REFUSED_CAPACITY] or sub.tally[Tally.NUMERICAL_SKIPS]):
         return None
     rerun_seqs = set(seqs[js].tolist())

@@ -175,16 +175,18 @@ class TrackSet:
             self._views = tuple(self.track(i) for i in range(len(self)))
         return self._views
 
-    def predicted_position(self, t_ns: int, q2: float) -> tuple[Array, Array]:
-        """Constant-velocity extrapolation of every track's position to t_ns, with the per-axis
-        variance P_pp + 2 dt P_pv + dt^2 P_vv + q2 dt^3 / 3 (no velocity: P_pp + q2 dt)."""
+    def predicted_position(self, t_ns: int, q2: float, rows: np.ndarray | None = None) -> tuple[Array, Array]:
+        """Constant-velocity extrapolation of every track's position to t_ns (of tracks `rows`
+        only, if given: elementwise, so the same bits as those rows of the whole), with the
+        per-axis variance P_pp + 2 dt P_pv + dt^2 P_vv + q2 dt^3 / 3 (no velocity: P_pp + q2 dt)."""
         pi, vi = list(self.layout.pos_idx), list(self.layout.vel_idx)
-        dt = ((t_ns - self.t_ns) * 1e-9)[:, None]
-        pos, vpp = self.X[:, pi], self.P[:, pi, pi]
+        X, P, t = (self.X, self.P, self.t_ns) if rows is None else (self.X[rows], self.P[rows], self.t_ns[rows])
+        dt = ((t_ns - t) * 1e-9)[:, None]
+        pos, vpp = X[:, pi], P[:, pi, pi]
         if not vi:
             return pos, vpp + q2 * np.abs(dt)
-        var = vpp + 2.0 * dt * self.P[:, pi, vi] + dt * dt * self.P[:, vi, vi] + q2 * dt**3 / 3.0
-        return pos + self.X[:, vi] * dt, np.maximum(var, 0.0)
+        var = vpp + 2.0 * dt * P[:, pi, vi] + dt * dt * P[:, vi, vi] + q2 * dt**3 / 3.0
+        return pos + X[:, vi] * dt, np.maximum(var, 0.0)
 
     def take(self, idx: np.ndarray) -> TrackSet:
         """The rows `idx` (indices, in that order) as a set of their own."""
