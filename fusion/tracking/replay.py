@@ -249,7 +249,7 @@ def _lookup(ids: np.ndarray, want: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     if ids.size == 0:
         return np.zeros(want.size, dtype=np.intp), np.zeros(want.size, dtype=bool)
     order = np.argsort(ids, kind="stable")
-    at = order[np.clip(np.searchsorted(ids, want, sorter=order), 0, ids.size - 1)]
+    at = order[np.minimum(np.searchsorted(ids, want, sorter=order), ids.size - 1)]
     return at, ids[at] == want
 
 

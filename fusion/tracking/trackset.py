@@ -42,7 +42,7 @@ def member(values: np.ndarray, of: np.ndarray) -> np.ndarray:
     if of.size == 0 or values.size == 0:
         return np.zeros(values.shape, dtype=bool)
     srt = np.sort(of)
-    return srt[np.clip(np.searchsorted(srt, values), 0, srt.size - 1)] == values
+    return srt[np.minimum(np.searchsorted(srt, values), srt.size - 1)] == values
 
 
 def track_id_for(sensor_id: str, seq: int, t_ns: int) -> int:
@@ -145,6 +145,17 @@ class TrackSet:
         self._views: tuple[Track, ...] | None = None
 
     @classmethod
+    def _of(cls, cols: dict[str, np.ndarray | None], layout: Layout) -> TrackSet:
+        """A set of the columns `cols` (every field of Rows), without building a Rows first."""
+        ts = cls.__new__(cls)
+        for f in ROW_FIELDS:
+            setattr(ts, f, cols[f])
+        ts.layout = layout
+        ts._index = None
+        ts._views = None
+        return ts
+
+    @classmethod
     def start(cls, layout: Layout) -> TrackSet:
         return cls(Rows.empty(layout), layout)
 
@@ -190,13 +201,12 @@ class TrackSet:
 
     def take(self, idx: np.ndarray) -> TrackSet:
         """The rows `idx` (indices, in that order) as a set of their own."""
-        return TrackSet(Rows(**{f: None if (c := getattr(self, f)) is None else c[idx] for f in ROW_FIELDS}),
-                        self.layout)
+        return TrackSet._of({f: None if (c := getattr(self, f)) is None else c[idx] for f in ROW_FIELDS}, self.layout)
 
     def joined(self, other: TrackSet) -> TrackSet:
         """This set's rows, then `other`'s (of the same layout)."""
-        return TrackSet(Rows(**{f: None if (c := getattr(self, f)) is None else np.concatenate([c, getattr(other, f)])
-                                for f in ROW_FIELDS}), self.layout)
+        return TrackSet._of({f: None if (c := getattr(self, f)) is None else np.concatenate([c, getattr(other, f)])
+                             for f in ROW_FIELDS}, self.layout)
 
     def changed_since(self, old: TrackSet, *, among: np.ndarray | None = None) -> np.ndarray:
         """For each row: False if `old` holds a row of the same track id identical to it bit for
@@ -214,7 +224,7 @@ class TrackSet:
             at, found = rows, np.ones(n, dtype=bool)
         else:
             order = np.argsort(old.ids, kind="stable")
-            at = order[np.clip(np.searchsorted(old.ids, self.ids[rows], sorter=order), 0, len(old) - 1)]
+            at = order[np.minimum(np.searchsorted(old.ids, self.ids[rows], sorter=order), len(old) - 1)]
             found = old.ids[at] == self.ids[rows]
         same = found.copy()
         for f in ROW_FIELDS:
@@ -251,4 +261,4 @@ class TrackSet:
             cols = {f: None if c is None else c[keep] for f, c in cols.items()}
         if born is not None and born.ids.size:
             cols = {f: None if c is None else np.concatenate([c, getattr(born, f)]) for f, c in cols.items()}
-        return TrackSet(Rows(**cols), self.layout)
+        return TrackSet._of(cols, self.layout)
