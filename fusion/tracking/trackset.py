@@ -113,6 +113,8 @@ class Rows:
 
 ROW_FIELDS = tuple(f.name for f in fields(Rows))
 COUNTERS = ("chances", "misses", "seen_by")
+# changed_since compares the columns a scan changes most first (a row found changed is compared no further)
+_COMPARE_ORDER = ("X", "MU", "t_ns", *(f for f in ROW_FIELDS if f not in ("X", "MU", "t_ns")))
 
 
 class TrackSet:
@@ -227,10 +229,12 @@ class TrackSet:
             at = order[np.minimum(np.searchsorted(old.ids, self.ids[rows], sorter=order), len(old) - 1)]
             found = old.ids[at] == self.ids[rows]
         same = found.copy()
-        for f in ROW_FIELDS:
+        for f in _COMPARE_ORDER:
             a = getattr(self, f)
-            if a is None or not same.any():
+            if a is None:
                 continue
+            if not same.any():
+                break
             a, b = a[rows[same]], getattr(old, f)[at[same]]
             a2, b2 = a.reshape(a.shape[0], -1), b.reshape(b.shape[0], -1)
             if a2.dtype.kind == "f":  # bits, not values: -0.0 and 0.0 differ, NaN equals itself
