@@ -128,12 +128,10 @@ def revise(entry: Entry, prev: Entry | None, new: list[Estimate], kept: Abstract
         rev = 0 if o is None else o[0] + 1
         entry.emitted[e.track_id] = (rev, sig, True)
         out.append(e.with_revision(rev))
-    for tid in sorted(old):
-        if tid in produced:
-            continue
-        if tid in kept:
-            entry.emitted[tid] = old[tid]
-            continue
+    gone = old.keys() - produced
+    stand = gone & kept if kept else set()  # kept tracks' stored estimates stand (a partial re-run)
+    entry.emitted.update({tid: old[tid] for tid in stand})
+    for tid in sorted(gone - stand):
         rev, sig, alive = old[tid]
         if alive:
             rev += 1

@@ -48,13 +48,16 @@ class Lifecycle:
     def born_status(self) -> Status:
         return Status.CONFIRMED if self.cfg.confirm_m <= 1 else Status.TENTATIVE
 
-    def sweep(self, before: TrackSet, after: TrackSet, hit: np.ndarray, sensor: SensorModel, t_ns: int) -> Sweep:
+    def sweep(self, before: TrackSet, after: TrackSet, hit: np.ndarray, sensor: SensorModel, t_ns: int,
+              predicted: tuple[np.ndarray, np.ndarray] | None = None) -> Sweep:
         """Counters and deletions after a scan of `sensor` at t_ns. `before` holds the tracks as
         they were gated (their predicted positions decide coverage), `after` the same rows with
-        the hit tracks updated; `hit` marks the rows that took a measurement."""
+        the hit tracks updated; `hit` marks the rows that took a measurement. `predicted`:
+        before.predicted_position(t_ns, q2) if the caller has it; after's rows that were not hit
+        are before's, so only the hit rows' spread is computed again."""
         cfg = self.cfg
         s = sensor.index
-        ppos, _ = before.predicted_position(t_ns, self.q2)
+        ppos, bvar = before.predicted_position(t_ns, self.q2) if predicted is None else predicted
         declared = sensor.covers(ppos)
         chance = hit | (before.seen_by[:, s] if declared is None else declared)
         chances = after.chances + chance
@@ -63,7 +66,9 @@ class Lifecycle:
         if hit.any():
             seen_by = seen_by.copy()
             seen_by[hit, s] = True
-        _, pvar = after.predicted_position(t_ns, self.q2)
+        pvar = bvar.copy()
+        if hit.any():
+            pvar[hit] = after.predicted_position(t_ns, self.q2, np.flatnonzero(hit))[1]
         tent = after.status == Status.TENTATIVE
         not_confirmed = tent & (chances >= cfg.confirm_n) & (after.hits < cfg.confirm_m)
         missed = ~tent & (misses > cfg.max_misses)

@@ -33,7 +33,7 @@ from fusion.core.association import coarse_pairs
 from fusion.core.checks import Array
 from fusion.tracking.detection import Detection
 from fusion.tracking.results import Association, EventKind, Outcome, ScanKey
-from fusion.tracking.scan import ScanContext, ScanOutcome, Tally, measured_points, run_scan
+from fusion.tracking.scan import Coarse, ScanContext, ScanOutcome, Tally, measured_points, run_scan
 from fusion.tracking.trackset import TrackSet, member
 
 
@@ -46,6 +46,7 @@ class Gates:
     seqs: np.ndarray
     mpos: Array
     mvar: Array
+    det_seqs: np.ndarray | None = None  # the seqs of the scan's detections, in their order
 
 
 @dataclass(frozen=True)
@@ -92,7 +93,7 @@ def gates_of(ts: TrackSet, key: ScanKey, dets: tuple[Detection, ...], ctx: ScanC
     tpos, tvar = ts.predicted_position(key[0], ctx.q2)
     ci, cj = coarse_pairs(tpos, tvar, mpos, mvar, k=ctx.coarse_k)
     seqs = np.array([d.seq for d in dets], dtype=np.int64)
-    return Gates(ts.ids[ci], seqs[cj], mpos, mvar)
+    return Gates(ts.ids[ci], seqs[cj], mpos, mvar, seqs)
 
 
 def gates_of_run(ts: TrackSet, dets: tuple[Detection, ...], out: ScanOutcome) -> Gates | None:
@@ -100,7 +101,8 @@ def gates_of_run(ts: TrackSet, dets: tuple[Detection, ...], out: ScanOutcome) ->
     if out.coarse is None or out.variances is None:
         return None
     ci, cj = out.coarse
-    return Gates(ts.ids[ci], np.array([d.seq for d in dets], dtype=np.int64)[cj], out.positions, out.variances)
+    seqs = np.array([d.seq for d in dets], dtype=np.int64)
+    return Gates(ts.ids[ci], seqs[cj], out.positions, out.variances, seqs)
 
 
 def _points(old: Stored, old_gates: Gates, dets: tuple[Detection, ...], seqs: np.ndarray, old_j: np.ndarray,
@@ -126,18 +128,18 @@ def _new_gates(ts: TrackSet, changed: np.ndarray, old_gates: Gates, points: tupl
     mpos, mvar = points
     keep = member(old_gates.ids, ts.ids[~changed])
     ids, sq = [old_gates.ids[keep]], [old_gates.seqs[keep]]
-    if changed.any() or new.any():
-        tpos, tvar = ts.predicted_position(t_ns, ctx.q2)
-        ch, nj = np.flatnonzero(changed), np.flatnonzero(new)
-        ci, cj = coarse_pairs(tpos[ch], tvar[ch], mpos, mvar, k=ctx.coarse_k)
+    ch, nj = np.flatnonzero(changed), np.flatnonzero(new)
+    if ch.size:
+        ci, cj = coarse_pairs(*ts.predicted_position(t_ns, ctx.q2, ch), mpos, mvar, k=ctx.coarse_k)
         ids.append(ts.ids[ch[ci]])
         sq.append(seqs[cj])
-        if nj.size:
-            un = np.flatnonzero(~changed)
-            ci, cj = coarse_pairs(tpos[un], tvar[un], mpos[nj], mvar[nj], k=ctx.coarse_k)
+    if nj.size:
+        un = np.flatnonzero(~changed)
+        if un.size:
+            ci, cj = coarse_pairs(*ts.predicted_position(t_ns, ctx.q2, un), mpos[nj], mvar[nj], k=ctx.coarse_k)
             ids.append(ts.ids[un[ci]])
             sq.append(seqs[nj[cj]])
-    return Gates(np.concatenate(ids), np.concatenate(sq), mpos, mvar)
+    return Gates(np.concatenate(ids), np.concatenate(sq), mpos, mvar, seqs)
 
 
 def _reach(seed_ids: np.ndarray, seed_seqs: np.ndarray, old_gates: Gates, new_gates: Gates
@@ -154,6 +156,18 @@ def _reach(seed_ids: np.ndarray, seed_seqs: np.ndarray, old_gates: Gates, new_ga
         if more_ids.size == hot_ids.size and more_seqs.size == hot_seqs.size:
             return hot_ids, hot_seqs
         hot_ids, hot_seqs = more_ids, more_seqs
+
+
+def _sub_coarse(ids: np.ndarray, sub_seqs: np.ndarray, js: np.ndarray, gates: Gates) -> Coarse:
+    """The coarse gate of the re-run part (tracks `ids`, detections `sub_seqs` = positions js):
+    the pairs of `gates` among them, as indices of the part sorted by (detection, track), as
+    coarse_pairs on the part gives them (the reach is closed under the pairs: a pair with one
+    end in it has both)."""
+    inside = member(gates.ids, ids)
+    i = _lookup(ids, gates.ids[inside])[0]
+    j = np.searchsorted(sub_seqs, gates.seqs[inside])
+    o = np.lexsort((i, j))
+    return Coarse(i[o].astype(np.intp), j[o].astype(np.intp), gates.mpos[js], gates.mvar[js])
 
 
 def _tally_of(assoc: list[Association], events: list, *, skips: int = 0) -> Counter:
@@ -186,13 +200,18 @@ def rerun(ts: TrackSet, key: ScanKey, dets: tuple[Detection, ...], ctx: ScanCont
     the stored run reported; `hint`: the previous scan's partial re-run, if any."""
     if old.tally[Tally.BIRTHS_REFUSED_CAPACITY] or old.tally[Tally.NUMERICAL_SKIPS]:
         return None  # the old run's counts are not per component: run the whole scan
-    seqs = np.array([d.seq for d in dets], dtype=np.int64)
-    old_j = np.searchsorted(seqs, np.array([d.seq for d in old.dets], dtype=np.int64))  # both sorted by seq
+    old_gates = old.gates if old.gates is not None else gates_of(old.before, key, old.dets, ctx)
+    old_seqs = old_gates.det_seqs if old_gates.det_seqs is not None else \
+        np.array([d.seq for d in old.dets], dtype=np.int64)
+    if len(dets) == len(old.dets):  # dets hold old.dets: the same detections
+        seqs, old_j = old_seqs, np.arange(len(dets))
+    else:
+        seqs = np.array([d.seq for d in dets], dtype=np.int64)
+        old_j = np.searchsorted(seqs, old_seqs)  # both sorted by seq
     new = np.ones(len(dets), dtype=bool)
     new[old_j] = False
     changed = ts.changed_since(old.before, among=hint.ids if hint is not None and hint.source is old.before else None)
     gone = old.before.ids[~member(old.before.ids, ts.ids)]
-    old_gates = old.gates if old.gates is not None else gates_of(old.before, key, old.dets, ctx)
     if not (changed.any() or gone.size or new.any()):  # nothing changed: the stored run stands
         if not np.array_equal(ts.ids, old.before.ids):
             return None  # the same rows in another order: the whole scan orders its output by them
@@ -207,28 +226,46 @@ def rerun(ts: TrackSet, key: ScanKey, dets: tuple[Detection, ...], ctx: ScanCont
     if rows.size == len(ts) and js.size == len(dets):
         return None  # everything is reached: the whole scan is the same work
     sub_dets = tuple(dets[j] for j in js.tolist())
-    sub = run_scan(ts.take(rows), key, sub_dets, ctx) if rows.size or js.size else None
+    sub = run_scan(ts.take(rows), key, sub_dets, ctx, _sub_coarse(ts.ids[rows], seqs[js], js, new_gates)) \
+        if rows.size or js.size else None
     if sub is not None and (sub.tally[Tally.BIRTHS_REFUSED_CAPACITY] or sub.tally[Tally.NUMERICAL_SKIPS]):
         return None
-    rerun_seqs = set(seqs[js].tolist())
-    kept_assoc = [a for a in old.associations if a.seq not in rerun_seqs]
-    kept_births = [a.track_id for a in kept_assoc if a.outcome == Outcome.BORN]
-    n_born = len(kept_births) + (0 if sub is None else int(sub.tally[Tally.BIRTHS]))
+    in_js = np.zeros(len(dets), dtype=bool)
+    in_js[js] = True
+    gone_k = np.flatnonzero(in_js[old_j]).tolist()  # the stored detections run again
+    A = old.after
+    kept_births = A.ids[~member(A.ids, old.before.ids) & ~member(A.origin_seq, seqs[js])]
+    n_born = kept_births.size + (0 if sub is None else int(sub.tally[Tally.BIRTHS]))
     if n_born > ctx.max_tracks - len(ts):
         return None  # births the whole scan would refuse for capacity: its counts are global
     after = _assemble(ts, rows, None if sub is None else sub.after, old, seqs[js])
     touched = np.unique(np.concatenate([ts.ids[rows]] + ([] if sub is None else [sub.after.ids])))
-    kept = ({int(i) for i in ts.ids.tolist()} | {int(i) for i in kept_births if i is not None}) \
-        - set(touched.tolist())
-    kept_events = [ev for ev in old_events if ev.track_id in kept]
-    tally = _tally_of(kept_assoc, kept_events)
-    assoc, estimates, events = kept_assoc, [], []
+    kept = set(ts.ids.tolist()).union(kept_births.tolist()).difference(touched.tolist())
+    # the stored tally less what the re-run part counted in the stored run, plus what it counts now
+    tally = old.tally - _tally_of([old.associations[k] for k in gone_k],
+                                  [ev for ev in old_events if ev.track_id not in kept])
+    assoc, estimates, events = old.associations, [], []
     if sub is not None:
         tally.update(sub.tally)
-        assoc = sorted(kept_assoc + sub.associations, key=lambda a: a.seq)
+        assoc = _spliced(old.associations, old_j, len(dets), sub.associations, js)
         estimates, events = sub.estimates, sub.events
     return Partial(ScanOutcome(after, estimates, events, assoc, tally, new_gates.mpos), kept, new_gates,
                    Hint(old.after, touched), int(rows.size), int(js.size))
+
+
+def _spliced(stored: list[Association], old_j: np.ndarray, n: int, part: list[Association], js: np.ndarray
+             ) -> list[Association]:
+    """The associations of the n detections in their order: the stored ones (of the detections
+    at positions old_j) with those of the re-run part (positions js) in their place."""
+    if len(stored) == n:
+        out = list(stored)
+    else:
+        out = [None] * n  # type: ignore[list-item]
+        for k, j in enumerate(old_j.tolist()):
+            out[j] = stored[k]
+    for a, j in zip(part, js.tolist(), strict=True):
+        out[j] = a
+    return out
 
 
 def _lookup(ids: np.ndarray, want: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -236,7 +273,7 @@ def _lookup(ids: np.ndarray, want: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     if ids.size == 0:
         return np.zeros(want.size, dtype=np.intp), np.zeros(want.size, dtype=bool)
     order = np.argsort(ids, kind="stable")
-    at = order[np.clip(np.searchsorted(ids, want, sorter=order), 0, ids.size - 1)]
+    at = order[np.minimum(np.searchsorted(ids, want, sorter=order), ids.size - 1)]
     return at, ids[at] == want
 
 

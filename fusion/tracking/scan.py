@@ -77,15 +77,32 @@ class ScanOutcome:
     coarse: tuple[np.ndarray, np.ndarray] | None = None  # the coarse pairs (track rows, detection indices)
 
 
-def run_scan(ts: TrackSet, key: ScanKey, dets: tuple[Detection, ...], ctx: ScanContext) -> ScanOutcome:
-    """The scan `key` (see the module docstring); `dets` sorted by seq, R resolved."""
+@dataclass(frozen=True)
+class Coarse:
+    """A scan's coarse gate, known before the scan runs: the pairs (track rows ti, detection
+    indices mj) as fusion.core.association.coarse_pairs returns them (sorted by (mj, ti)), and
+    the detections' world points and per-axis variances (as measured_points gives them)."""
+
+    ti: np.ndarray
+    mj: np.ndarray
+    mpos: Array
+    mvar: Array
+
+
+def run_scan(ts: TrackSet, key: ScanKey, dets: tuple[Detection, ...], ctx: ScanContext,
+             coarse: Coarse | None = None) -> ScanOutcome:
+    """The scan `key` (see the module docstring); `dets` sorted by seq, R resolved. `coarse`:
+    the scan's coarse gate if the caller knows it (a partial re-run: fusion.tracking.replay)."""
     t_ns, sensor_id = key
     sm = ctx.sensors[sensor_id]
     meas = Measured.of(tuple(d.z for d in dets), tuple(d.R for d in dets),  # type: ignore[arg-type]
                        tuple(sm.by_dim[d.z.shape[0]] for d in dets))
-    mpos, mvar = _measured_points(sm, meas)
     tpos, tvar = ts.predicted_position(t_ns, ctx.q2)
-    ci, cj = coarse_pairs(tpos, tvar, mpos, mvar, k=ctx.coarse_k)
+    if coarse is None:
+        mpos, mvar = _measured_points(sm, meas)
+        ci, cj = coarse_pairs(tpos, tvar, mpos, mvar, k=ctx.coarse_k)
+    else:
+        ci, cj, mpos, mvar = coarse.ti, coarse.mj, coarse.mpos, coarse.mvar
     gated = ctx.gater.gate(ts, t_ns, ci, cj, meas)
     pairs = _assign_confirmed_first(gated, ts, len(dets))
 
@@ -129,7 +146,7 @@ def run_scan(ts: TrackSet, key: ScanKey, dets: tuple[Detection, ...], ctx: ScanC
     updated = ts.derive(update=(ti, updated_rows))
     hit = np.zeros(len(ts), dtype=bool)
     hit[ti] = True
-    sweep = ctx.lifecycle.sweep(ts, updated, hit, sm, t_ns)
+    sweep = ctx.lifecycle.sweep(ts, updated, hit, sm, t_ns, (tpos, tvar))
     for ev in sweep.events:
         if ev.reason is not None:  # deletions, by reason (coasting events are not counted)
             tally[ev.reason] += 1

@@ -183,14 +183,17 @@ class Tracker:
         hint = None
         for key in rw.keys:
             prev = rw.old.get(key)
-            dets = tuple(sorted((prev.dets if prev else ()) + tuple(scans.get(key, ())), key=lambda d: d.seq))
+            arrived = scans.get(key)
+            dets = prev.dets if arrived is None and prev is not None else \
+                tuple(sorted((prev.dets if prev else ()) + tuple(arrived or ()), key=lambda d: d.seq))
             part = self._rerun(ts, key, dets, prev, rw.after.get(key), hint)
             out = part.outcome if part is not None else run_scan(ts, key, dets, self.ctx)
             kept = part.kept if part is not None else frozenset()
             hint = part.hint if part is not None else None
-            new = {d.seq for d in scans.get(key, ())}
-            points.extend(MeasuredPoint(d.sensor_id, d.t_ns, d.seq, out.positions[j])
-                          for j, d in enumerate(dets) if d.seq in new)
+            if arrived:
+                new = {d.seq for d in arrived}
+                points.extend(MeasuredPoint(d.sensor_id, d.t_ns, d.seq, out.positions[j])
+                              for j, d in enumerate(dets) if d.seq in new)
             entry = Entry(key, dets, ts, tally=out.tally, associations=out.associations,
                           gates=part.gates if part is not None else gates_of_run(ts, dets, out))
             estimates.extend(revise(entry, prev, out.estimates, kept))

@@ -42,7 +42,7 @@ def member(values: np.ndarray, of: np.ndarray) -> np.ndarray:
     if of.size == 0 or values.size == 0:
         return np.zeros(values.shape, dtype=bool)
     srt = np.sort(of)
-    return srt[np.clip(np.searchsorted(srt, values), 0, srt.size - 1)] == values
+    return srt[np.minimum(np.searchsorted(srt, values), srt.size - 1)] == values
 
 
 def track_id_for(sensor_id: str, seq: int, t_ns: int) -> int:
@@ -113,6 +113,8 @@ class Rows:
 
 ROW_FIELDS = tuple(f.name for f in fields(Rows))
 COUNTERS = ("chances", "misses", "seen_by")
+# changed_since compares the columns a scan changes most first (a row found changed is compared no further)
+_COMPARE_ORDER = ("X", "MU", "t_ns", *(f for f in ROW_FIELDS if f not in ("X", "MU", "t_ns")))
 
 
 class TrackSet:
@@ -145,6 +147,17 @@ class TrackSet:
         self._views: tuple[Track, ...] | None = None
 
     @classmethod
+    def _of(cls, cols: dict[str, np.ndarray | None], layout: Layout) -> TrackSet:
+        """A set of the columns `cols` (every field of Rows), without building a Rows first."""
+        ts = cls.__new__(cls)
+        for f in ROW_FIELDS:
+            setattr(ts, f, cols[f])
+        ts.layout = layout
+        ts._index = None
+        ts._views = None
+        return ts
+
+    @classmethod
     def start(cls, layout: Layout) -> TrackSet:
         return cls(Rows.empty(layout), layout)
 
@@ -175,26 +188,27 @@ class TrackSet:
             self._views = tuple(self.track(i) for i in range(len(self)))
         return self._views
 
-    def predicted_position(self, t_ns: int, q2: float) -> tuple[Array, Array]:
-        """Constant-velocity extrapolation of every track's position to t_ns, with the per-axis
-        variance P_pp + 2 dt P_pv + dt^2 P_vv + q2 dt^3 / 3 (no velocity: P_pp + q2 dt)."""
+    def predicted_position(self, t_ns: int, q2: float, rows: np.ndarray | None = None) -> tuple[Array, Array]:
+        """Constant-velocity extrapolation of every track's position to t_ns (of tracks `rows`
+        only, if given: elementwise, so the same bits as those rows of the whole), with the
+        per-axis variance P_pp + 2 dt P_pv + dt^2 P_vv + q2 dt^3 / 3 (no velocity: P_pp + q2 dt)."""
         pi, vi = list(self.layout.pos_idx), list(self.layout.vel_idx)
-        dt = ((t_ns - self.t_ns) * 1e-9)[:, None]
-        pos, vpp = self.X[:, pi], self.P[:, pi, pi]
+        X, P, t = (self.X, self.P, self.t_ns) if rows is None else (self.X[rows], self.P[rows], self.t_ns[rows])
+        dt = ((t_ns - t) * 1e-9)[:, None]
+        pos, vpp = X[:, pi], P[:, pi, pi]
         if not vi:
             return pos, vpp + q2 * np.abs(dt)
-        var = vpp + 2.0 * dt * self.P[:, pi, vi] + dt * dt * self.P[:, vi, vi] + q2 * dt**3 / 3.0
-        return pos + self.X[:, vi] * dt, np.maximum(var, 0.0)
+        var = vpp + 2.0 * dt * P[:, pi, vi] + dt * dt * P[:, vi, vi] + q2 * dt**3 / 3.0
+        return pos + X[:, vi] * dt, np.maximum(var, 0.0)
 
     def take(self, idx: np.ndarray) -> TrackSet:
         """The rows `idx` (indices, in that order) as a set of their own."""
-        return TrackSet(Rows(**{f: None if (c := getattr(self, f)) is None else c[idx] for f in ROW_FIELDS}),
-                        self.layout)
+        return TrackSet._of({f: None if (c := getattr(self, f)) is None else c[idx] for f in ROW_FIELDS}, self.layout)
 
     def joined(self, other: TrackSet) -> TrackSet:
         """This set's rows, then `other`'s (of the same layout)."""
-        return TrackSet(Rows(**{f: None if (c := getattr(self, f)) is None else np.concatenate([c, getattr(other, f)])
-                                for f in ROW_FIELDS}), self.layout)
+        return TrackSet._of({f: None if (c := getattr(self, f)) is None else np.concatenate([c, getattr(other, f)])
+                             for f in ROW_FIELDS}, self.layout)
 
     def changed_since(self, old: TrackSet, *, among: np.ndarray | None = None) -> np.ndarray:
         """For each row: False if `old` holds a row of the same track id identical to it bit for
@@ -212,13 +226,15 @@ class TrackSet:
             at, found = rows, np.ones(n, dtype=bool)
         else:
             order = np.argsort(old.ids, kind="stable")
-            at = order[np.clip(np.searchsorted(old.ids, self.ids[rows], sorter=order), 0, len(old) - 1)]
+            at = order[np.minimum(np.searchsorted(old.ids, self.ids[rows], sorter=order), len(old) - 1)]
             found = old.ids[at] == self.ids[rows]
         same = found.copy()
-        for f in ROW_FIELDS:
+        for f in _COMPARE_ORDER:
             a = getattr(self, f)
-            if a is None or not same.any():
+            if a is None:
                 continue
+            if not same.any():
+                break
             a, b = a[rows[same]], getattr(old, f)[at[same]]
             a2, b2 = a.reshape(a.shape[0], -1), b.reshape(b.shape[0], -1)
             if a2.dtype.kind == "f":  # bits, not values: -0.0 and 0.0 differ, NaN equals itself
@@ -249,4 +265,4 @@ class TrackSet:
             cols = {f: None if c is None else c[keep] for f, c in cols.items()}
         if born is not None and born.ids.size:
             cols = {f: None if c is None else np.concatenate([c, getattr(born, f)]) for f, c in cols.items()}
-        return TrackSet(Rows(**cols), self.layout)
+        return TrackSet._of(cols, self.layout)
