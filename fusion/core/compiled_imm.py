@@ -9,7 +9,9 @@ mu_k, switching matrices Pi_k, predicted probabilities c_k = mu_k Pi_k, computed
                      `sel` that move (compiled_stack.combine_into), mode-major (M, S, ...);
     predict_many:    each moving mode x-_kj = F_kj x0_kj (or f(x0_kj) where the model is
                      nonlinear: the caller's Xf), P-_kj = F_kj P0_kj F_kj' + Q_kj
-                     (compiled.predict_into); rows that do not move keep their modes; then the
+                     (compiled.predict_into), F_kj = F[j, Fi[j, s]] for moving row s (so that
+                     F and Q set by dt alone are given once per distinct dt), Q likewise;
+                     rows that do not move keep their modes; then the
                      combination x_k = sum_j c_kj x-_kj, P_k likewise;
     innovate_modes:  each mode's S_kj, NIS and log-likelihood of its innovation y_kj
                      (compiled_stack.innovate_into);
@@ -52,7 +54,8 @@ def mix_many(xs: np.ndarray, Ps: np.ndarray, mu: np.ndarray, Pi: np.ndarray, c: 
 
 @njit(cache=True, fastmath=False)
 def predict_many(xs: np.ndarray, Ps: np.ndarray, sel: np.ndarray, X0: np.ndarray, P0: np.ndarray,
-                 F: np.ndarray, Q: np.ndarray, Xf: np.ndarray, use_f: np.ndarray, c: np.ndarray
+                 F: np.ndarray, Fi: np.ndarray, Q: np.ndarray, Qi: np.ndarray, Xf: np.ndarray,
+                 use_f: np.ndarray, c: np.ndarray
                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     N, M, n = xs.shape
     pxs = xs.copy()
@@ -60,7 +63,7 @@ def predict_many(xs: np.ndarray, Ps: np.ndarray, sel: np.ndarray, X0: np.ndarray
     for s in range(sel.shape[0]):
         k = sel[s]
         for j in range(M):
-            predict_into(X0[j, s], P0[j, s], F[j, s], Q[j, s], pxs[k, j], pPs[k, j])
+            predict_into(X0[j, s], P0[j, s], F[j, Fi[j, s]], Q[j, Qi[j, s]], pxs[k, j], pPs[k, j])
             if use_f[j]:
                 pxs[k, j] = Xf[j, s]
     X = np.empty((N, n))

@@ -27,6 +27,7 @@ from fusion.core.compiled_imm import innovate_modes, mix_many, mixture_many, pos
 from fusion.core.imm import IMM
 from fusion.core.kalman import ExtendedKalmanFilter
 from fusion.core.measurement import MeasurementModel
+from fusion.core.motion import LinearMotionModel
 from fusion.errors import NumericalError
 
 
@@ -54,28 +55,36 @@ def _f64(a: Array) -> Array:
 def predict_imm(imm: IMM, xs: Array, Ps: Array, mu: Array, dt: Array) -> StackPrediction:
     """Mix and predict N IMM states by dt (N,) seconds each: the mixing and the modes' predicts
     and combination are compiled loops over the stack (fusion.core.compiled_imm); each mode's
-    motion model gives its F, Q (and f if nonlinear) for the whole stack in one call."""
-    N, M, n = xs.shape
+    motion model gives its F, Q (and f if nonlinear) for the whole stack in one call, or once
+    per distinct dt where dt alone sets them."""
+    M, n = xs.shape[1], xs.shape[2]
     xs, Ps, mu = _f64(xs), _f64(Ps), _f64(mu)
-    Pi = np.empty((N, M, M))
-    for d in np.unique(dt).tolist():
-        Pi[dt == d] = imm.transition(float(d))
+    du, inv = np.unique(dt, return_inverse=True)  # few distinct steps: Pi, and F, Q where dt alone sets them
+    Pi = np.stack([imm.transition(d) for d in du.tolist()])[inv]
     c = np.einsum("km,kmj->kj", mu, Pi)
     moving = dt > 0
     sel = np.flatnonzero(moving)
-    S = sel.size
+    S, U = sel.size, du.size
     X0, P0 = mix_many(xs, Ps, mu, Pi, c, sel)
-    F, Q, Xf = np.empty((M, S, n, n)), np.empty((M, S, n, n)), np.empty((M, S, n))
+    F, Q, Xf = np.empty((M, max(S, U), n, n)), np.empty((M, max(S, U), n, n)), np.empty((M, S, n))
+    Fi, Qi = np.empty((M, S), dtype=np.intp), np.empty((M, S), dtype=np.intp)
     use_f = np.zeros(M, dtype=np.bool_)
     if S:
-        dts = dt[sel]
+        dts, per_row, per_dt = dt[sel], np.arange(S), inv[sel]
         for j, f in enumerate(imm.filters):
             m = f.motion
-            F[j], Q[j] = m.jacobian(X0[j], dts), m.Q(X0[j], dts)
+            if isinstance(m, LinearMotionModel):
+                F[j, :U], Fi[j] = m.F(du), per_dt
+            else:
+                F[j, :S], Fi[j] = m.jacobian(X0[j], dts), per_row
+            if m.noise_depends_on_state:
+                Q[j, :S], Qi[j] = m.Q(X0[j], dts), per_row
+            else:
+                Q[j, :U], Qi[j] = m.Q(np.zeros((U, n)), du), per_dt
             if not m.is_linear:
                 Xf[j], use_f[j] = m.f(X0[j], dts), True
     c = np.where(moving[:, None], c, mu)
-    pxs, pPs, x, P = predict_many(xs, Ps, sel, X0, P0, F, Q, Xf, use_f, c)
+    pxs, pPs, x, P = predict_many(xs, Ps, sel, X0, P0, F, Fi, Q, Qi, Xf, use_f, c)
     return StackPrediction(pxs, pPs, c, x, P)
 
 

@@ -36,6 +36,9 @@ class MotionModel(ABC):
     # f, jacobian and Q accept a stack (..., n) with dt of the stack's leading shape: the
     # tracker then predicts and gates many tracks in one call.
     broadcasts: bool = False
+    # Q(x, dt) does not read x: a stack's Q can be computed once per distinct dt (the stacked IMM
+    # does); a subclass whose Q depends on the state sets it True.
+    noise_depends_on_state: bool = True
 
     @abstractmethod
     def f(self, x: Array, dt_s: float | Array) -> Array:
@@ -58,6 +61,7 @@ class LinearMotionModel(MotionModel):
     """x' = F(dt) x (+ B(dt) u) + w. Subclasses define F and Q as functions of dt only."""
 
     is_linear = True
+    noise_depends_on_state = False
 
     @abstractmethod
     def F(self, dt_s: float | Array) -> Array:
@@ -211,6 +215,7 @@ class CoordinatedTurn(MotionModel):
     position_indices = (0, 2)
     velocity_indices = (1, 3)
     broadcasts = True
+    noise_depends_on_state = False
 
     def __init__(self, *, q_accel: float, q_turn: float) -> None:
         if not (q_accel >= 0 and q_turn >= 0 and np.isfinite(q_accel) and np.isfinite(q_turn)):
