@@ -112,11 +112,9 @@ def innovate_imm(pred: StackPrediction, Z: Array, R: Array, model: MeasurementMo
     some mode's S is not positive definite."""
     N, M, n = pred.xs.shape
     m = Z.shape[1]
-    ys, Hs = np.empty((N, M, m)), np.empty((N, M, m, n))
-    for j in range(M):
-        xp = pred.xs[:, j]
-        ys[:, j] = model.residual(Z, model.h(xp))
-        Hs[:, j] = model.jacobian(xp)
+    xs = pred.xs  # (N, M, n): the models broadcast over the mode axis too
+    ys = _f64(model.residual(Z[:, None, :], model.h(xs)))
+    Hs = _f64(np.broadcast_to(model.jacobian(xs), (N, M, m, n)))
     R = _f64(np.broadcast_to(R, (N, m, m)))
     ok, Ss, ll = innovate_modes(_f64(pred.Ps), ys, Hs, R)
     if not ok:

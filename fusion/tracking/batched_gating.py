@@ -83,7 +83,10 @@ class _Batched(ABC):
         kept = Kept()
         if ci.size == 0:
             return kept.done()
-        tracks, row = np.unique(ci, return_inverse=True)  # predict each candidate track once
+        seen = np.zeros(len(ts), dtype=np.bool_)  # predict each candidate track once: tracks sorted,
+        seen[ci] = True  # ci = tracks[row] (np.unique(ci, return_inverse=True) without its sort)
+        tracks = np.flatnonzero(seen)
+        row = (np.cumsum(seen) - 1)[ci]
         pred = self._predict(ts, t_ns, tracks)
         dims = meas.dims[cj]
         for dim in np.unique(dims).tolist():
