@@ -13,12 +13,13 @@ mu_k, switching matrices Pi_k, predicted probabilities c_k = mu_k Pi_k, computed
                      F and Q set by dt alone are given once per distinct dt), Q likewise;
                      rows that do not move keep their modes; then the
                      combination x_k = sum_j c_kj x-_kj, P_k likewise;
-    innovate_modes:  each mode's S_kj, NIS and log-likelihood of its innovation y_kj
-                     (compiled_stack.innovate_into);
+    innovate_modes:  each mode's S_kj, NIS and log-likelihood of its innovation y_kj, pair k
+                     of predicted state rows[k] (compiled_stack.innovate_into);
     mixture_many:    the mixture innovation y_k = sum_j c_kj y_kj and
                      S_k = sum_j c_kj S_kj + sum_j (c_kj d_kj) d_kj', d_kj = y_kj - y_k;
-    posterior_many:  each mode's EKF update of the pairs `rows` (compiled.update) and their
-                     combination with the posterior probabilities.
+    posterior_many:  each mode's EKF update of the pairs `rows` (predicted state at[k] of pair
+                     k; compiled.update_into) and their combination with the posterior
+                     probabilities.
 Arrays are allocated here (their sizes depend on the stack) and returned; the inputs must be
 float64 and C-contiguous (the callers in imm_stack pass them so).
 """
@@ -76,9 +77,9 @@ def predict_many(xs: np.ndarray, Ps: np.ndarray, sel: np.ndarray, X0: np.ndarray
 
 
 @njit(cache=True, fastmath=False)
-def innovate_modes(Ps: np.ndarray, Y: np.ndarray, H: np.ndarray, R: np.ndarray
+def innovate_modes(Ps: np.ndarray, rows: np.ndarray, Y: np.ndarray, H: np.ndarray, R: np.ndarray
                    ) -> tuple[bool, np.ndarray, np.ndarray]:
-    N, M, n = Ps.shape[0], Ps.shape[1], Ps.shape[2]
+    N, M, n = rows.shape[0], Ps.shape[1], Ps.shape[2]
     m = Y.shape[2]
     Ss = np.empty((N, M, m, m))
     ll = np.empty((N, M))
@@ -87,7 +88,7 @@ def innovate_modes(Ps: np.ndarray, Y: np.ndarray, H: np.ndarray, R: np.ndarray
     w = np.empty(m)
     for k in range(N):
         for j in range(M):
-            good, _, ll[k, j] = innovate_into(Ps[k, j], Y[k, j], H[k, j], R[k], Ss[k, j], HP, L, w)
+            good, _, ll[k, j] = innovate_into(Ps[rows[k], j], Y[k, j], H[k, j], R[k], Ss[k, j], HP, L, w)
             if not good:
                 return False, Ss, ll
     return True, Ss, ll
@@ -119,8 +120,8 @@ def mixture_many(c: np.ndarray, ys: np.ndarray, Ss: np.ndarray) -> tuple[np.ndar
 
 
 @njit(cache=True, fastmath=False)
-def posterior_many(xs: np.ndarray, Ps: np.ndarray, ys: np.ndarray, Hs: np.ndarray, R: np.ndarray,
-                   mu: np.ndarray, rows: np.ndarray
+def posterior_many(xs: np.ndarray, Ps: np.ndarray, at: np.ndarray, ys: np.ndarray, Hs: np.ndarray,
+                   R: np.ndarray, mu: np.ndarray, rows: np.ndarray
                    ) -> tuple[bool, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     M, n = xs.shape[1], xs.shape[2]
     m = ys.shape[2]
@@ -130,8 +131,9 @@ def posterior_many(xs: np.ndarray, Ps: np.ndarray, ys: np.ndarray, Hs: np.ndarra
     S = np.empty((m, m))
     for q in range(K):
         k = rows[q]
+        p = at[k]
         for j in range(M):
-            good, _, _ = update_into(xs[k, j], Ps[k, j], ys[k, j], Hs[k, j], R[k], uxs[q, j], uPs[q, j], S)
+            good, _, _ = update_into(xs[p, j], Ps[p, j], ys[k, j], Hs[k, j], R[k], uxs[q, j], uPs[q, j], S)
             if not good:
                 return False, uxs, uPs, uxs[:, 0], uPs[:, 0]
     X = np.empty((K, n))

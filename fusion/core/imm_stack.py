@@ -93,7 +93,8 @@ class StackInnovation:
     """What a gate decides on, for N (predicted IMM state, measurement) pairs: each mode's
     innovation ys (N, M, m), its covariance Ss (N, M, m, m) and Jacobian Hs (N, M, m, n) at the
     mode's prior; the posterior mode probabilities mu (N, M); the mixture innovation y, its
-    covariance S, NIS and log-likelihood; and the measurement noise R (N, m, m)."""
+    covariance S, NIS and log-likelihood; the measurement noise R (N, m, m); and each pair's
+    row in the prediction (rows)."""
 
     ys: Array
     Ss: Array
@@ -104,27 +105,30 @@ class StackInnovation:
     nis: Array
     loglik: Array
     R: Array
+    rows: np.ndarray
 
 
-def innovate_imm(pred: StackPrediction, Z: Array, R: Array, model: MeasurementModel) -> StackInnovation:
-    """The innovation half of the update of N predicted IMM states with one measurement each
-    (Z (N, m), R (N, m, m)): everything but the modes' posteriors. Raises NumericalError where
-    some mode's S is not positive definite."""
-    N, M, n = pred.xs.shape
+def innovate_imm(pred: StackPrediction, rows: np.ndarray, Z: Array, R: Array, model: MeasurementModel
+                 ) -> StackInnovation:
+    """The innovation half of the update of N pairs (predicted IMM state rows[k] of pred, one
+    measurement Z[k], R[k] each: Z (N, m), R (N, m, m)): everything but the modes' posteriors.
+    Raises NumericalError where some mode's S is not positive definite."""
+    rows = np.ascontiguousarray(rows, dtype=np.intp)
+    xs = pred.xs[rows]  # (N, M, n): the models broadcast over the mode axis too
+    N, M, n = xs.shape
     m = Z.shape[1]
-    xs = pred.xs  # (N, M, n): the models broadcast over the mode axis too
     ys = _f64(model.residual(Z[:, None, :], model.h(xs)))
     Hs = _f64(np.broadcast_to(model.jacobian(xs), (N, M, m, n)))
     R = _f64(np.broadcast_to(R, (N, m, m)))
-    ok, Ss, ll = innovate_modes(_f64(pred.Ps), ys, Hs, R)
+    ok, Ss, ll = innovate_modes(_f64(pred.Ps), rows, ys, Hs, R)
     if not ok:
         raise NumericalError("an innovation covariance S is not positive definite")
-    a = np.log(np.maximum(pred.c, 1e-300)) + ll
+    c = pred.c[rows]
+    a = np.log(np.maximum(c, 1e-300)) + ll
     amax = a.max(axis=1, keepdims=True)
     mix_ll = amax[:, 0] + np.log(np.exp(a - amax).sum(axis=1))
     mu = np.exp(a - mix_ll[:, None])
     mu = mu / mu.sum(axis=1, keepdims=True)
-    c = pred.c
     if M == 2:  # numpy's einsum sums longer mode axes in another order (the mixture is bit for bit its)
         y, S = mixture_many(_f64(c), ys, Ss)
     else:
@@ -132,14 +136,14 @@ def innovate_imm(pred: StackPrediction, Z: Array, R: Array, model: MeasurementMo
         dy = ys - y[:, None, :]
         S = np.einsum("km,kmab->kab", c, Ss) + np.einsum("km,kma,kmb->kab", c, dy, dy)
     nis = np.einsum("ka,ka->k", y, np.linalg.solve(S, y[..., None])[..., 0])
-    return StackInnovation(ys, Ss, Hs, mu, y, S, nis, mix_ll, R)
+    return StackInnovation(ys, Ss, Hs, mu, y, S, nis, mix_ll, R, rows)
 
 
-def posterior_imm(pred: StackPrediction, inn: StackInnovation, rows: np.ndarray) -> tuple[Array, Array, Array, Array]:
-    """The modes' posteriors of pairs `rows` (each mode's EKF update from its innovation) and
-    their combination with the posterior mode probabilities: (xs, Ps, x, P)."""
-    ok, xs, Ps, x, P = posterior_many(_f64(pred.xs), _f64(pred.Ps), inn.ys, inn.Hs, inn.R, _f64(inn.mu),
-                                      rows.astype(np.intp))
+def posterior_imm(pred: StackPrediction, inn: StackInnovation, keep: np.ndarray) -> tuple[Array, Array, Array, Array]:
+    """The modes' posteriors of the innovated pairs `keep` (each mode's EKF update from its
+    innovation) and their combination with the posterior mode probabilities: (xs, Ps, x, P)."""
+    ok, xs, Ps, x, P = posterior_many(_f64(pred.xs), _f64(pred.Ps), inn.rows, inn.ys, inn.Hs, inn.R, _f64(inn.mu),
+                                      keep.astype(np.intp))
     if not ok:
         raise NumericalError("an innovation covariance S is not positive definite")
     return xs, Ps, x, P

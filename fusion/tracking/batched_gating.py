@@ -157,16 +157,16 @@ class BatchedIMMGate(_Batched):
     def _innovate(self, pred: object, rows: np.ndarray, Z: Array, R: Array, model: MeasurementModel
                   ) -> tuple[Array, Array, object]:
         p: StackPrediction = pred  # type: ignore[assignment]
-        sub = StackPrediction(p.xs[rows], p.Ps[rows], p.c[rows], p.x[rows], p.P[rows])
-        inn = innovate_imm(sub, Z, R, model)
-        return inn.nis, inn.loglik, (sub, inn, model)
+        inn = innovate_imm(p, rows, Z, R, model)
+        return inn.nis, inn.loglik, (p, inn, model)
 
     def _finish(self, inner: object, keep: np.ndarray) -> Part:
-        sub, inn, model = inner  # type: ignore[misc]
-        xs, Ps, x, P = posterior_imm(sub, inn, keep)
-        px = sub.x[keep]
+        p, inn, model = inner  # type: ignore[misc]
+        xs, Ps, x, P = posterior_imm(p, inn, keep)
+        at = inn.rows[keep]
+        px = p.x[at]
         H = np.broadcast_to(model.jacobian(px), (keep.size, inn.y.shape[1], px.shape[1]))
-        return Part(x, P, px, sub.P[keep], inn.y[keep], inn.S[keep], H, inn.nis[keep], xs, Ps, inn.mu[keep])
+        return Part(x, P, px, p.P[at], inn.y[keep], inn.S[keep], H, inn.nis[keep], xs, Ps, inn.mu[keep])
 
 
 class BatchedUKFGate(_Batched):
