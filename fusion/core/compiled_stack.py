@@ -111,26 +111,38 @@ def innovate_many(P: np.ndarray, Y: np.ndarray, H: np.ndarray, R: np.ndarray
 
 
 @njit(cache=True, fastmath=False)
-def combine_many(xs: np.ndarray, Ps: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    N, M, n = xs.shape
-    X = np.zeros((N, n))
-    P = np.zeros((N, n, n))
-    for k in range(N):
-        for m in range(M):
-            for a in range(n):
-                X[k, a] += w[k, m] * xs[k, m, a]
-        A = np.zeros((n, n))
-        B = np.zeros((n, n))
-        for m in range(M):
-            wm = w[k, m]
-            for a in range(n):
-                da = wm * (xs[k, m, a] - X[k, a])
-                for b in range(n):
-                    A[a, b] += wm * Ps[k, m, a, b]
-                    B[a, b] += da * (xs[k, m, b] - X[k, b])
+def combine_into(xs: np.ndarray, Ps: np.ndarray, w: np.ndarray, X: np.ndarray, P: np.ndarray,
+                 A: np.ndarray, B: np.ndarray) -> None:
+    """One moment-matched mixture of xs (M, n), Ps (M, n, n) with weights w (M,) into X (n,),
+    P (n, n); A, B (n, n) are the caller's work arrays."""
+    M, n = xs.shape
+    X[:] = 0.0
+    for m in range(M):
         for a in range(n):
+            X[a] += w[m] * xs[m, a]
+    A[:, :] = 0.0
+    B[:, :] = 0.0
+    for m in range(M):
+        wm = w[m]
+        for a in range(n):
+            da = wm * (xs[m, a] - X[a])
             for b in range(n):
-                P[k, a, b] = 0.5 * ((A[a, b] + B[a, b]) + (A[b, a] + B[b, a]))
+                A[a, b] += wm * Ps[m, a, b]
+                B[a, b] += da * (xs[m, b] - X[b])
+    for a in range(n):
+        for b in range(n):
+            P[a, b] = 0.5 * ((A[a, b] + B[a, b]) + (A[b, a] + B[b, a]))
+
+
+@njit(cache=True, fastmath=False)
+def combine_many(xs: np.ndarray, Ps: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    N, n = xs.shape[0], xs.shape[2]
+    X = np.empty((N, n))
+    P = np.empty((N, n, n))
+    A = np.empty((n, n))
+    B = np.empty((n, n))
+    for k in range(N):
+        combine_into(xs[k], Ps[k], w[k], X[k], P[k], A, B)
     return X, P
 
 

@@ -23,10 +23,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from fusion.core.checks import Array
-from fusion.core.compiled_stack import combine_stack, innovate_stack, predict_stack, update_stack
+from fusion.core.compiled_imm import innovate_modes, mix_many, mixture_many, posterior_many, predict_many
 from fusion.core.imm import IMM
 from fusion.core.kalman import ExtendedKalmanFilter
 from fusion.core.measurement import MeasurementModel
+from fusion.core.motion import LinearMotionModel
 from fusion.errors import NumericalError
 
 
@@ -47,26 +48,43 @@ class StackPrediction:
     P: Array
 
 
+def _f64(a: Array) -> Array:
+    return np.ascontiguousarray(a, dtype=np.float64)
+
+
 def predict_imm(imm: IMM, xs: Array, Ps: Array, mu: Array, dt: Array) -> StackPrediction:
-    """Mix and predict N IMM states by dt (N,) seconds each."""
-    N, M, _ = xs.shape
-    Pi = np.empty((N, M, M))
-    for d in np.unique(dt).tolist():
-        Pi[dt == d] = imm.transition(float(d))
+    """Mix and predict N IMM states by dt (N,) seconds each: the mixing and the modes' predicts
+    and combination are compiled loops over the stack (fusion.core.compiled_imm); each mode's
+    motion model gives its F, Q (and f if nonlinear) for the whole stack in one call, or once
+    per distinct dt where dt alone sets them."""
+    M, n = xs.shape[1], xs.shape[2]
+    xs, Ps, mu = _f64(xs), _f64(Ps), _f64(mu)
+    du, inv = np.unique(dt, return_inverse=True)  # few distinct steps: Pi, and F, Q where dt alone sets them
+    Pi = np.stack([imm.transition(d) for d in du.tolist()])[inv]
     c = np.einsum("km,kmj->kj", mu, Pi)
-    W = Pi * mu[:, :, None] / np.where(c > 0, c, 1.0)[:, None, :]  # W[k, i, j] = w_kij
     moving = dt > 0
-    pxs, pPs = xs.copy(), Ps.copy()
-    c = np.where(moving[:, None], c, mu)
-    if moving.any():
-        sel = np.flatnonzero(moving)
+    sel = np.flatnonzero(moving)
+    S, U = sel.size, du.size
+    X0, P0 = mix_many(xs, Ps, mu, Pi, c, sel)
+    F, Q, Xf = np.empty((M, max(S, U), n, n)), np.empty((M, max(S, U), n, n)), np.empty((M, S, n))
+    Fi, Qi = np.empty((M, S), dtype=np.intp), np.empty((M, S), dtype=np.intp)
+    use_f = np.zeros(M, dtype=np.bool_)
+    if S:
+        dts, per_row, per_dt = dt[sel], np.arange(S), inv[sel]
         for j, f in enumerate(imm.filters):
-            x0, P0 = combine_stack(xs[sel], Ps[sel], W[sel, :, j])
             m = f.motion
-            dts = dt[sel]
-            xp, Pp = predict_stack(x0, P0, m.jacobian(x0, dts), m.Q(x0, dts))
-            pxs[sel, j], pPs[sel, j] = (xp if m.is_linear else m.f(x0, dts)), Pp
-    x, P = combine_stack(pxs, pPs, c)
+            if isinstance(m, LinearMotionModel):
+                F[j, :U], Fi[j] = m.F(du), per_dt
+            else:
+                F[j, :S], Fi[j] = m.jacobian(X0[j], dts), per_row
+            if m.noise_depends_on_state:
+                Q[j, :S], Qi[j] = m.Q(X0[j], dts), per_row
+            else:
+                Q[j, :U], Qi[j] = m.Q(np.zeros((U, n)), du), per_dt
+            if not m.is_linear:
+                Xf[j], use_f[j] = m.f(X0[j], dts), True
+    c = np.where(moving[:, None], c, mu)
+    pxs, pPs, x, P = predict_many(xs, Ps, sel, X0, P0, F, Fi, Q, Qi, Xf, use_f, c)
     return StackPrediction(pxs, pPs, c, x, P)
 
 
@@ -75,7 +93,8 @@ class StackInnovation:
     """What a gate decides on, for N (predicted IMM state, measurement) pairs: each mode's
     innovation ys (N, M, m), its covariance Ss (N, M, m, m) and Jacobian Hs (N, M, m, n) at the
     mode's prior; the posterior mode probabilities mu (N, M); the mixture innovation y, its
-    covariance S, NIS and log-likelihood; and the measurement noise R (N, m, m)."""
+    covariance S, NIS and log-likelihood; the measurement noise R (N, m, m); and each pair's
+    row in the prediction (rows)."""
 
     ys: Array
     Ss: Array
@@ -86,47 +105,45 @@ class StackInnovation:
     nis: Array
     loglik: Array
     R: Array
+    rows: np.ndarray
 
 
-def innovate_imm(pred: StackPrediction, Z: Array, R: Array, model: MeasurementModel) -> StackInnovation:
-    """The innovation half of the update of N predicted IMM states with one measurement each
-    (Z (N, m), R (N, m, m)): everything but the modes' posteriors. Raises NumericalError where
-    some mode's S is not positive definite."""
-    N, M, n = pred.xs.shape
+def innovate_imm(pred: StackPrediction, rows: np.ndarray, Z: Array, R: Array, model: MeasurementModel
+                 ) -> StackInnovation:
+    """The innovation half of the update of N pairs (predicted IMM state rows[k] of pred, one
+    measurement Z[k], R[k] each: Z (N, m), R (N, m, m)): everything but the modes' posteriors.
+    Raises NumericalError where some mode's S is not positive definite."""
+    rows = np.ascontiguousarray(rows, dtype=np.intp)
+    xs = pred.xs[rows]  # (N, M, n): the models broadcast over the mode axis too
+    N, M, n = xs.shape
     m = Z.shape[1]
-    ys, Ss, ll = np.empty((N, M, m)), np.empty((N, M, m, m)), np.empty((N, M))
-    Hs = np.empty((N, M, m, n))
-    for j in range(M):
-        xp = pred.xs[:, j]
-        y = model.residual(Z, model.h(xp))
-        Hs[:, j] = model.jacobian(xp)
-        ok, Ss[:, j], _, ll[:, j] = innovate_stack(pred.Ps[:, j], y, Hs[:, j], R)
-        if not ok.all():
-            raise NumericalError("an innovation covariance S is not positive definite")
-        ys[:, j] = y
-    a = np.log(np.maximum(pred.c, 1e-300)) + ll
+    ys = _f64(model.residual(Z[:, None, :], model.h(xs)))
+    Hs = _f64(np.broadcast_to(model.jacobian(xs), (N, M, m, n)))
+    R = _f64(np.broadcast_to(R, (N, m, m)))
+    ok, Ss, ll = innovate_modes(_f64(pred.Ps), rows, ys, Hs, R)
+    if not ok:
+        raise NumericalError("an innovation covariance S is not positive definite")
+    c = pred.c[rows]
+    a = np.log(np.maximum(c, 1e-300)) + ll
     amax = a.max(axis=1, keepdims=True)
     mix_ll = amax[:, 0] + np.log(np.exp(a - amax).sum(axis=1))
     mu = np.exp(a - mix_ll[:, None])
     mu = mu / mu.sum(axis=1, keepdims=True)
-    c = pred.c
-    y = np.einsum("km,kma->ka", c, ys)
-    dy = ys - y[:, None, :]
-    S = np.einsum("km,kmab->kab", c, Ss) + np.einsum("km,kma,kmb->kab", c, dy, dy)
+    if M == 2:  # numpy's einsum sums longer mode axes in another order (the mixture is bit for bit its)
+        y, S = mixture_many(_f64(c), ys, Ss)
+    else:
+        y = np.einsum("km,kma->ka", c, ys)
+        dy = ys - y[:, None, :]
+        S = np.einsum("km,kmab->kab", c, Ss) + np.einsum("km,kma,kmb->kab", c, dy, dy)
     nis = np.einsum("ka,ka->k", y, np.linalg.solve(S, y[..., None])[..., 0])
-    return StackInnovation(ys, Ss, Hs, mu, y, S, nis, mix_ll, np.broadcast_to(R, (N, m, m)))
+    return StackInnovation(ys, Ss, Hs, mu, y, S, nis, mix_ll, R, rows)
 
 
-def posterior_imm(pred: StackPrediction, inn: StackInnovation, rows: np.ndarray) -> tuple[Array, Array, Array, Array]:
-    """The modes' posteriors of pairs `rows` (each mode's EKF update from its innovation) and
-    their combination with the posterior mode probabilities: (xs, Ps, x, P)."""
-    K, (_, M, n) = rows.size, pred.xs.shape
-    xs, Ps = np.empty((K, M, n)), np.empty((K, M, n, n))
-    R = inn.R[rows]
-    for j in range(M):
-        ok, xs[:, j], Ps[:, j], _, _, _ = update_stack(pred.xs[rows, j], pred.Ps[rows, j], inn.ys[rows, j],
-                                                       inn.Hs[rows, j], R)
-        if not ok.all():
-            raise NumericalError("an innovation covariance S is not positive definite")
-    x, P = combine_stack(xs, Ps, inn.mu[rows])
+def posterior_imm(pred: StackPrediction, inn: StackInnovation, keep: np.ndarray) -> tuple[Array, Array, Array, Array]:
+    """The modes' posteriors of the innovated pairs `keep` (each mode's EKF update from its
+    innovation) and their combination with the posterior mode probabilities: (xs, Ps, x, P)."""
+    ok, xs, Ps, x, P = posterior_many(_f64(pred.xs), _f64(pred.Ps), inn.rows, inn.ys, inn.Hs, inn.R, _f64(inn.mu),
+                                      keep.astype(np.intp))
+    if not ok:
+        raise NumericalError("an innovation covariance S is not positive definite")
     return xs, Ps, x, P

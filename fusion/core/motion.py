@@ -18,6 +18,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from fusion.core.checks import Array, as_covariance
+from fusion.core.compiled_motion import SMALL, ct_f_many, ct_jacobian_many
 from fusion.errors import ConfigError
 
 
@@ -35,6 +36,9 @@ class MotionModel(ABC):
     # f, jacobian and Q accept a stack (..., n) with dt of the stack's leading shape: the
     # tracker then predicts and gates many tracks in one call.
     broadcasts: bool = False
+    # Q(x, dt) does not read x: a stack's Q can be computed once per distinct dt (the stacked IMM
+    # does); a subclass whose Q depends on the state sets it True.
+    noise_depends_on_state: bool = True
 
     @abstractmethod
     def f(self, x: Array, dt_s: float | Array) -> Array:
@@ -57,6 +61,7 @@ class LinearMotionModel(MotionModel):
     """x' = F(dt) x (+ B(dt) u) + w. Subclasses define F and Q as functions of dt only."""
 
     is_linear = True
+    noise_depends_on_state = False
 
     @abstractmethod
     def F(self, dt_s: float | Array) -> Array:
@@ -210,6 +215,7 @@ class CoordinatedTurn(MotionModel):
     position_indices = (0, 2)
     velocity_indices = (1, 3)
     broadcasts = True
+    noise_depends_on_state = False
 
     def __init__(self, *, q_accel: float, q_turn: float) -> None:
         if not (q_accel >= 0 and q_turn >= 0 and np.isfinite(q_accel) and np.isfinite(q_turn)):
@@ -223,13 +229,31 @@ class CoordinatedTurn(MotionModel):
         """s/w, (1-c)/w, c, s with a Taylor series where |omega dt| is tiny."""
         wt = w * dt
         s, c = np.sin(wt), np.cos(wt)
-        small = np.abs(wt) < 1e-6
+        small = np.abs(wt) < SMALL
         w_safe = np.where(small, 1.0, w)
         sw = np.where(small, dt * (1 - wt**2 / 6), s / w_safe)
         cw = np.where(small, dt * (wt / 2 - wt**3 / 24), 2.0 * np.sin(0.5 * wt) ** 2 / w_safe)
         return sw, cw, c, s
 
+    @staticmethod
+    def _stack_terms(x: Array, dt_s: float | Array) -> tuple[Array, ...] | None:
+        """For a stack x (N, 5) with dt (N,): (x, dt, sin, cos of omega dt, sin of omega dt / 2,
+        (omega dt)^3, dt^3, dt^4), the numpy terms of fusion.core.compiled_motion's loops (the
+        powers only where some |omega dt| needs the series); None for other shapes."""
+        if not (isinstance(dt_s, np.ndarray) and dt_s.ndim == 1 and x.ndim == 2 and x.shape == (dt_s.shape[0], 5)):
+            return None
+        x = np.ascontiguousarray(x, dtype=np.float64)
+        dt = np.ascontiguousarray(dt_s, dtype=np.float64)
+        wt = x[:, 4] * dt
+        s, c, sh = np.sin(wt), np.cos(wt), np.sin(0.5 * wt)
+        if (np.abs(wt) < SMALL).any():
+            return x, dt, s, c, sh, wt**3, dt**3, dt**4
+        return x, dt, s, c, sh, wt, dt, dt  # the powers are not read
+
     def f(self, x: Array, dt_s: float | Array) -> Array:
+        st = self._stack_terms(x, dt_s)
+        if st is not None:
+            return ct_f_many(*st[:6])
         dt = np.asarray(dt_s, dtype=np.float64)
         px, vx, py, vy, w = (x[..., i] for i in range(5))
         sw, cw, c, s = self._terms(w, dt)
@@ -239,11 +263,14 @@ class CoordinatedTurn(MotionModel):
         )
 
     def jacobian(self, x: Array, dt_s: float | Array) -> Array:
+        st = self._stack_terms(x, dt_s)
+        if st is not None:
+            return ct_jacobian_many(*st)
         dt = np.asarray(dt_s, dtype=np.float64)
         vx, vy, w = x[..., 1], x[..., 3], x[..., 4]
         sw, cw, c, s = self._terms(w, dt)
         wt = w * dt
-        small = np.abs(wt) < 1e-6
+        small = np.abs(wt) < SMALL
         w_safe = np.where(small, 1.0, w)
         # d(s/w)/dw and d((1-c)/w)/dw, with their series near omega dt = 0
         dsw = np.where(small, -(dt**3) * w / 3, (dt * c - sw) / w_safe)

@@ -83,7 +83,10 @@ class _Batched(ABC):
         kept = Kept()
         if ci.size == 0:
             return kept.done()
-        tracks, row = np.unique(ci, return_inverse=True)  # predict each candidate track once
+        seen = np.zeros(len(ts), dtype=np.bool_)  # predict each candidate track once: tracks sorted,
+        seen[ci] = True  # ci = tracks[row] (np.unique(ci, return_inverse=True) without its sort)
+        tracks = np.flatnonzero(seen)
+        row = (np.cumsum(seen) - 1)[ci]
         pred = self._predict(ts, t_ns, tracks)
         dims = meas.dims[cj]
         for dim in np.unique(dims).tolist():
@@ -154,16 +157,16 @@ class BatchedIMMGate(_Batched):
     def _innovate(self, pred: object, rows: np.ndarray, Z: Array, R: Array, model: MeasurementModel
                   ) -> tuple[Array, Array, object]:
         p: StackPrediction = pred  # type: ignore[assignment]
-        sub = StackPrediction(p.xs[rows], p.Ps[rows], p.c[rows], p.x[rows], p.P[rows])
-        inn = innovate_imm(sub, Z, R, model)
-        return inn.nis, inn.loglik, (sub, inn, model)
+        inn = innovate_imm(p, rows, Z, R, model)
+        return inn.nis, inn.loglik, (p, inn, model)
 
     def _finish(self, inner: object, keep: np.ndarray) -> Part:
-        sub, inn, model = inner  # type: ignore[misc]
-        xs, Ps, x, P = posterior_imm(sub, inn, keep)
-        px = sub.x[keep]
+        p, inn, model = inner  # type: ignore[misc]
+        xs, Ps, x, P = posterior_imm(p, inn, keep)
+        at = inn.rows[keep]
+        px = p.x[at]
         H = np.broadcast_to(model.jacobian(px), (keep.size, inn.y.shape[1], px.shape[1]))
-        return Part(x, P, px, sub.P[keep], inn.y[keep], inn.S[keep], H, inn.nis[keep], xs, Ps, inn.mu[keep])
+        return Part(x, P, px, p.P[at], inn.y[keep], inn.S[keep], H, inn.nis[keep], xs, Ps, inn.mu[keep])
 
 
 class BatchedUKFGate(_Batched):

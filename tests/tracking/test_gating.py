@@ -27,11 +27,16 @@ MODELS = {
     "imm-cv-cv": MotionConfig(model="imm", modes=[
         ModeConfig(model="cv", accel_psd_m2s3=0.1, sojourn_s=20.0),
         ModeConfig(model="cv", accel_psd_m2s3=10.0, sojourn_s=2.0)]),
+    "imm-cv-cv-ct": MotionConfig(model="imm", modes=[  # three modes: the mixture's numpy branch
+        ModeConfig(model="cv", accel_psd_m2s3=0.1, sojourn_s=20.0),
+        ModeConfig(model="cv", accel_psd_m2s3=10.0, sojourn_s=2.0),
+        ModeConfig(model="ct", accel_psd_m2s3=0.25, turn_psd_rad2s3=0.01, sojourn_s=5.0)]),
     "ukf-cv": MotionConfig(model="cv", accel_psd_m2s3=0.5, filter="ukf"),
     "ukf-ct": MotionConfig(model="ct", accel_psd_m2s3=0.5, turn_psd_rad2s3=0.01, filter="ukf"),
 }
 BATCHED = {"cv": BatchedGate, "ca": BatchedGate, "ct": BatchedGate, "imm-cv-ct": BatchedIMMGate,
-           "imm-cv-cv": BatchedIMMGate, "ukf-cv": BatchedUKFGate, "ukf-ct": BatchedUKFGate}
+           "imm-cv-cv": BatchedIMMGate, "imm-cv-cv-ct": BatchedIMMGate,
+           "ukf-cv": BatchedUKFGate, "ukf-ct": BatchedUKFGate}
 
 
 def run(motion: MotionConfig, gate: type, seed: int) -> list:
