@@ -18,6 +18,7 @@ the latest published estimate of every live confirmed track.
 
 from __future__ import annotations
 
+import heapq
 from collections.abc import Iterable
 
 from fusion.tracking.results import Estimate, EstimateKey, EventKind, TrackEvent
@@ -31,16 +32,26 @@ class PublishedView:
         self.tracks: dict[int, int] = {}  # published track ids -> time of their latest published estimate
         self.events: dict[tuple[str, int, int, str], TrackEvent] = {}  # published, not withdrawn
         self._pruned_at: int | None = None
+        self._by_time: list[tuple[int, EstimateKey]] = []  # heap of (t_ns, key) of the keys in `latest`
+        self._kept: list[EstimateKey] = []  # keys past the horizon kept as a live track's current one
 
     def select(self, estimates: Iterable[Estimate]) -> tuple[Estimate, ...]:
         """The estimates of one step to publish (see the module docstring); remembers them."""
         out = []
+        latest, tracks, by_time, tentative = self.latest, self.tracks, self._by_time, self.publish_tentative
         for e in estimates:
-            k = e.key
-            if k in self.latest or e.status == "confirmed" or (self.publish_tentative and e.status == "tentative"):
-                self.latest[k] = e
-                self.tracks[e.track_id] = max(e.t_ns, self.tracks.get(e.track_id, e.t_ns))
-                out.append(e)
+            k = (tid, t, _) = e.key
+            if k in latest:
+                latest[k] = e
+            elif e.status == "confirmed" or (tentative and e.status == "tentative"):
+                latest[k] = e
+                heapq.heappush(by_time, (t, k))
+            else:
+                continue
+            last = tracks.get(tid)
+            if last is None or t > last:
+                tracks[tid] = t
+            out.append(e)
         return tuple(out)
 
     def select_events(self, events: Iterable[TrackEvent]) -> tuple[TrackEvent, ...]:
@@ -68,19 +79,33 @@ class PublishedView:
     def _current(tracks: TrackSet, *, confirmed_only: bool = False) -> set[EstimateKey]:
         """The key of every live track's current estimate: (id, time and sensor of its last update)."""
         names = tracks.layout.sensors
-        rows = range(len(tracks))
-        return {(int(tracks.ids[i]), int(tracks.t_ns[i]), names[int(tracks.last_sensor[i])]) for i in rows
-                if not confirmed_only or tracks.status[i] == Status.CONFIRMED}
+        ids, ts, last = tracks.ids, tracks.t_ns, tracks.last_sensor
+        if confirmed_only:
+            rows = tracks.status == Status.CONFIRMED
+            ids, ts, last = ids[rows], ts[rows], last[rows]
+        return {(i, t, names[s]) for i, t, s in zip(ids.tolist(), ts.tolist(), last.tolist(), strict=True)}
 
     def prune(self, horizon_ns: int | None, tracks: TrackSet, *, every_ns: int = 1_000_000_000) -> None:
         """Forget keys before the horizon (they can no longer be revised) unless they hold a live
-        track's current estimate. Runs when the horizon has moved by `every_ns` since last time."""
+        track's current estimate. Runs when the horizon has moved by `every_ns` since last time.
+        Only the keys before the horizon are visited (a heap by time, and the keys kept last
+        time), not every key published in the window."""
         if horizon_ns is None or (self._pruned_at is not None and horizon_ns - self._pruned_at < every_ns):
             return
         self._pruned_at = horizon_ns
         current = self._current(tracks)
-        for k in [k for k in self.latest if k[1] < horizon_ns and k not in current]:
-            del self.latest[k]
+        latest, by_time = self.latest, self._by_time
+        due = self._kept  # kept last time: no longer exempt once their track has moved on
+        while by_time and by_time[0][0] < horizon_ns:  # the keys before the horizon, oldest first
+            due.append(heapq.heappop(by_time)[1])
+        self._kept = []
+        for k in due:
+            if k[1] >= horizon_ns:  # kept before a horizon that has moved back since: wait again
+                heapq.heappush(by_time, (k[1], k))
+            elif k in current:
+                self._kept.append(k)
+            else:
+                latest.pop(k, None)
         live = {int(i) for i in tracks.ids.tolist()}
         for tid in [t for t, last in self.tracks.items() if last < horizon_ns and t not in live]:
             del self.tracks[tid]
