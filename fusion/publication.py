@@ -18,7 +18,6 @@ the latest published estimate of every live confirmed track.
 
 from __future__ import annotations
 
-import heapq
 from collections.abc import Iterable
 
 from fusion.tracking.results import Estimate, EstimateKey, EventKind, TrackEvent
@@ -32,26 +31,16 @@ class PublishedView:
         self.tracks: dict[int, int] = {}  # published track ids -> time of their latest published estimate
         self.events: dict[tuple[str, int, int, str], TrackEvent] = {}  # published, not withdrawn
         self._pruned_at: int | None = None
-        self._by_time: list[tuple[int, EstimateKey]] = []  # heap of (t_ns, key) of the keys in `latest`
-        self._kept: list[EstimateKey] = []  # keys past the horizon kept as a live track's current one
 
     def select(self, estimates: Iterable[Estimate]) -> tuple[Estimate, ...]:
         """The estimates of one step to publish (see the module docstring); remembers them."""
         out = []
-        latest, tracks, by_time, tentative = self.latest, self.tracks, self._by_time, self.publish_tentative
         for e in estimates:
-            k = (tid, t, _) = e.key
-            if k in latest:
-                latest[k] = e
-            elif e.status == "confirmed" or (tentative and e.status == "tentative"):
-                latest[k] = e
-                heapq.heappush(by_time, (t, k))
-            else:
-                continue
-            last = tracks.get(tid)
-            if last is None or t > last:
-                tracks[tid] = t
-            out.append(e)
+            k = e.key
+            if k in self.latest or e.status == "confirmed" or (self.publish_tentative and e.status == "tentative"):
+                self.latest[k] = e
+                self.tracks[e.track_id] = max(e.t_ns, self.tracks.get(e.track_id, e.t_ns))
+                out.append(e)
         return tuple(out)
 
     def select_events(self, events: Iterable[TrackEvent]) -> tuple[TrackEvent, ...]:
@@ -87,25 +76,13 @@ class PublishedView:
 
     def prune(self, horizon_ns: int | None, tracks: TrackSet, *, every_ns: int = 1_000_000_000) -> None:
         """Forget keys before the horizon (they can no longer be revised) unless they hold a live
-        track's current estimate. Runs when the horizon has moved by `every_ns` since last time.
-        Only the keys before the horizon are visited (a heap by time, and the keys kept last
-        time), not every key published in the window."""
+        track's current estimate. Runs when the horizon has moved by `every_ns` since last time."""
         if horizon_ns is None or (self._pruned_at is not None and horizon_ns - self._pruned_at < every_ns):
             return
         self._pruned_at = horizon_ns
         current = self._current(tracks)
-        latest, by_time = self.latest, self._by_time
-        due = self._kept  # kept last time: no longer exempt once their track has moved on
-        while by_time and by_time[0][0] < horizon_ns:  # the keys before the horizon, oldest first
-            due.append(heapq.heappop(by_time)[1])
-        self._kept = []
-        for k in due:
-            if k[1] >= horizon_ns:  # kept before a horizon that has moved back since: wait again
-                heapq.heappush(by_time, (k[1], k))
-            elif k in current:
-                self._kept.append(k)
-            else:
-                latest.pop(k, None)
+        for k in [k for k in self.latest if k[1] < horizon_ns and k not in current]:
+            del self.latest[k]
         live = {int(i) for i in tracks.ids.tolist()}
         for tid in [t for t, last in self.tracks.items() if last < horizon_ns and t not in live]:
             del self.tracks[tid]
