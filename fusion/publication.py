@@ -68,9 +68,11 @@ class PublishedView:
     def _current(tracks: TrackSet, *, confirmed_only: bool = False) -> set[EstimateKey]:
         """The key of every live track's current estimate: (id, time and sensor of its last update)."""
         names = tracks.layout.sensors
-        rows = range(len(tracks))
-        return {(int(tracks.ids[i]), int(tracks.t_ns[i]), names[int(tracks.last_sensor[i])]) for i in rows
-                if not confirmed_only or tracks.status[i] == Status.CONFIRMED}
+        ids, ts, last = tracks.ids, tracks.t_ns, tracks.last_sensor
+        if confirmed_only:
+            rows = tracks.status == Status.CONFIRMED
+            ids, ts, last = ids[rows], ts[rows], last[rows]
+        return {(i, t, names[s]) for i, t, s in zip(ids.tolist(), ts.tolist(), last.tolist(), strict=True)}
 
     def prune(self, horizon_ns: int | None, tracks: TrackSet, *, every_ns: int = 1_000_000_000) -> None:
         """Forget keys before the horizon (they can no longer be revised) unless they hold a live

@@ -45,6 +45,7 @@ from fusion.io.rerun_sink import RerunSink
 from fusion.io.stream_rotation import Retention, RotatingStream
 from fusion.io.zenoh_advanced import RecoveringSubscription
 from fusion.io.zenoh_bus import connection_of, open_with_retry
+from fusion.io.zenoh_publishers import KeyedPublishers
 from fusion.pipeline import Pipeline, Record
 from fusion.prediction import Cadence, encode_predicted, predicted_key, snapshot_time
 from fusion.tracking.detection import Reason
@@ -110,6 +111,7 @@ class Service:
         self.smoothed_published = 0
         self.session: Any = None
         self._decls: list[Any] = []
+        self._track_pubs: KeyedPublishers | None = None  # one declared publisher per published track
         self.on_publish: Callable[[Estimate], None] | None = None
         self._connect_attempts = 0
         self._linked = True  # a client: connected to its peer or router when last looked
@@ -229,9 +231,10 @@ class Service:
         enc = wire.estimate_encoder(self.tracker.layout, self.tracker.model_name)
         BLOCK = self._zenoh.CongestionControl.BLOCK
         encoded = self._encoded
+        pubs = self._publishers()
         for e in out.to_publish:
             payload = enc(e)
-            self.session.put(wire.track_key(self.ns, e.track_id), payload, congestion_control=BLOCK)
+            pubs.put(e.track_id, payload)
             encoded[e.key] = (e, payload)  # the snapshot reuses the bytes (_refresh_status)
             self.published += 1
             if self.on_publish is not None:
@@ -250,6 +253,14 @@ class Service:
                 self.session.put(predicted_key(self.ns), encode_predicted(self.tracker, t_ns),
                                  congestion_control=BLOCK)
                 self.predicted_published += 1
+
+    def _publishers(self) -> KeyedPublishers:
+        """The track publishers of the current session (fusion.io.zenoh_publishers)."""
+        if self._track_pubs is None:
+            ns = self.ns
+            self._track_pubs = KeyedPublishers(self.session, lambda tid: wire.track_key(ns, tid),
+                                               congestion_control=self._zenoh.CongestionControl.BLOCK)
+        return self._track_pubs
 
     def run(self, *, duration_s: float | None = None) -> int:
         """Process until stop() (or a signal handler calling it) or `duration_s`; then shut down."""
@@ -308,6 +319,9 @@ class Service:
         for d in self._decls[3:]:
             d.undeclare()
         self._decls = []
+        if self._track_pubs is not None:
+            self._track_pubs.close()
+            self._track_pubs = None
         if self._guard is not None:
             self._guard.close()
         if self.stream is not None:
@@ -428,6 +442,8 @@ class Service:
             return
         self._status_at = now
         self._status_payload = wire.encode_status(self.status_dict())
+        if self._track_pubs is not None:  # deleted tracks give their publishers back
+            self._track_pubs.retire(set(self.tracker.track_set.ids.tolist()))
         enc = wire.estimate_encoder(self.tracker.layout, self.tracker.model_name)
         was, now_encoded = self._encoded, {}
         parts = []

@@ -46,3 +46,54 @@ def test_tentative_estimates_never_published_stay_unpublished() -> None:
     assert view.select(tr.process([Detection.of("s1", 0, 0, [0.0, 0.0])]).estimates) == ()
     assert PublishedView(publish_tentative=True).select(
         _tracker().process([Detection.of("s1", 0, 0, [0.0, 0.0])]).estimates)
+
+
+def _pruned_as_before(latest: dict, horizon_ns: int, tracks: object) -> set:
+    """The keys the view keeps after a prune, as first written: every key before the horizon
+    is dropped unless it holds a live track's current estimate."""
+    current = PublishedView._current(tracks)  # type: ignore[arg-type]
+    return {k for k in latest if not (k[1] < horizon_ns and k not in current)}
+
+
+def test_prune_keeps_exactly_the_keys_the_rule_keeps() -> None:
+    """Three sensors, five targets and clutter over 12 s (seeded), horizons of the tracker's 2 s
+    window: after every prune the view holds exactly what the rule keeps (the heap by time
+    visits only what is due, kept current keys are looked at again: one target falls silent for
+    4 s and comes back)."""
+    import numpy as np
+
+    from fusion.config import TimeConfig
+
+    rng = np.random.default_rng(11)
+    sensors = [CartesianSensorConfig(id=s, std_m=[1.0, 1.0]) for s in ("s1", "s2", "s3")]
+    tr = Tracker(TrackerConfig(sensors=sensors, lifecycle=LifecycleConfig(confirm_m=2, confirm_n=3, max_misses=200),
+                               time=TimeConfig(lag_s=2.0)))
+    view = PublishedView()
+    starts = rng.uniform(-500, 500, size=(5, 2))
+    seq = dict.fromkeys(("s1", "s2", "s3"), 0)
+    prunes, kept_seen = 0, False
+    for k in range(120):
+        t = k * 100 * MS
+        dets = []
+        for s in ("s1", "s2", "s3"):
+            for j, p in enumerate(starts):
+                if j == 4 and 40 < k <= 80:
+                    continue  # silent for 4 s: its track's current key, before the horizon, is kept until it
+                    # comes back and updates the track
+                z = p + np.array([10.0, 5.0]) * t / 1e9 + rng.normal(0, 1, 2)
+                dets.append(Detection.of(s, t, seq[s], z))
+                seq[s] += 1
+            if rng.random() < 0.5:
+                dets.append(Detection.of(s, t, seq[s], rng.uniform(-2000, 2000, 2)))
+                seq[s] += 1
+        view.select(tr.process(dets).estimates)
+        before = dict(view.latest)
+        h = tr.horizon_ns
+        if h is not None and (view._pruned_at is None or h - view._pruned_at >= 300 * MS):
+            expected = _pruned_as_before(before, h, tr.track_set)
+            view.prune(h, tr.track_set, every_ns=300 * MS)
+            assert set(view.latest) == expected, f"scan {k}"
+            kept_seen = kept_seen or any(key[1] < h for key in expected)
+            prunes += 1
+    assert prunes > 10 and kept_seen
+    assert len(view.latest) < 5 * 3 * 30  # the window's keys, not all of those published

@@ -86,6 +86,7 @@ class IntakeQueue:
         self._len = 0
         self._bytes = 0
         self._bucket: dict[str, tuple[float, float]] = {}  # class -> (tokens, time of last refill)
+        self._classes: dict[str, str] = {}  # key expression -> its class (source_class), remembered
         self.offered = 0
         self.handed_out = 0
         self.refused: Counter[str] = Counter()
@@ -128,9 +129,13 @@ class IntakeQueue:
     def offer(self, arrival_ns: int, key: str, size: int, payload: Callable[[], bytes]) -> str | None:
         """Queue one sample; None when queued, else the reason it was refused. `payload` is
         called (the bytes copied) only once the sample is admitted."""
-        cls = source_class(key, self._known)
         lim = self.limits
         with self._lock:
+            cls = self._classes.get(key)
+            if cls is None:  # a few keys carry every sample: each is classified once
+                if len(self._classes) >= 4096:
+                    self._classes.clear()
+                cls = self._classes[key] = source_class(key, self._known)
             self.offered += 1
             if size > lim.max_message_bytes:
                 self._refuse(cls, TOO_LARGE)
@@ -156,8 +161,10 @@ class IntakeQueue:
             self._seq += 1
             self._len += 1
             self._bytes += cost
-            self.max_depth = max(self.max_depth, self._len)
-            self.max_bytes = max(self.max_bytes, self._bytes)
+            if self._len > self.max_depth:
+                self.max_depth = self._len
+            if self._bytes > self.max_bytes:
+                self.max_bytes = self._bytes
             return None
 
     def _biggest(self) -> str | None:

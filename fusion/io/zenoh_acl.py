@@ -22,7 +22,8 @@ With NS the namespace, what each role may do (everything else is dropped):
   consumer      subscribe fusion/NS/tracks/* and receive its puts; query fusion/NS/status and
                 fusion/NS/snapshot and receive the replies
   recorder      subscribe fusion/NS/meas/* and fusion/NS/truth/* and receive their puts
-  service       put fusion/NS/tracks/*; declare the status and snapshot queryables, receive the
+  service       put fusion/NS/tracks/* and see the subscriptions on it (its declared publishers
+                only send to subscribers they know of); declare the status and snapshot queryables, receive the
                 queries on them and reply; subscribe measurements and truth and receive their
                 puts (for rules on a router the service connects to)
 
@@ -64,7 +65,7 @@ def role_grants(role: str, ns: str, *, sensor_id: str = "") -> list[tuple[str, s
     if role == "recorder":
         return [(SUB, IN, [k["meas"], k["truth"]]), (PUT, OUT, [k["meas"], k["truth"]])]
     if role == "service":
-        return [(PUT, IN, [k["tracks"]]), (QUERYABLE, IN, queries), (REPLY, IN, queries),
+        return [(PUT, IN, [k["tracks"]]), (SUB, OUT, [k["tracks"]]), (QUERYABLE, IN, queries), (REPLY, IN, queries),
                 (SUB, IN, [k["meas"], k["truth"]]), (PUT, OUT, [k["meas"], k["truth"]]),
                 (QUERY, OUT, queries)]
     raise ValueError(f"unknown role {role!r}")

@@ -53,6 +53,7 @@ class Intake:
         self._seen: set[Identity] = set()
         # (sensor, m): the last read-only R found valid, with its diagonal
         self._valid_R: dict[tuple[str, int], tuple[np.ndarray, list[float]]] = {}
+        self._default_diag: dict[tuple[str, int], tuple[np.ndarray, list[float]]] = {}  # (sensor, m): default R
         self._kinds = {s: (sm, sm.is_radar) for s, sm in sensors.items()}  # looked up per detection
 
     def admit(self, d: Detection) -> tuple[Detection | None, Refusal | None]:
@@ -163,7 +164,10 @@ class Intake:
                 return d, _no(d, Reason.INVALID, f"no noise: the message carries none and sensor {sid} "
                               "has no default in the configuration")
             d = Detection(sid, d.t_ns, seq, z, R, d.arrival_ns, d.epoch)
-            return d, _placed(d, radar, sm.ndim, zl, R.diagonal().tolist())
+            dflt = self._default_diag.get((sid, m))
+            if dflt is None or dflt[0] is not R:  # the default's diagonal, once per sensor and size
+                dflt = self._default_diag[(sid, m)] = (R, R.diagonal().tolist())
+            return d, _placed(d, radar, sm.ndim, zl, dflt[1])
         known = self._valid_R.get((sid, m))
         if known is not None and known[0] is R:
             return d, _placed(d, radar, sm.ndim, zl, known[1])
