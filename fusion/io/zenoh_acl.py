@@ -23,9 +23,9 @@ With NS the namespace, what each role may do (everything else is dropped):
                 fusion/NS/snapshot and receive the replies
   recorder      subscribe fusion/NS/meas/* and fusion/NS/truth/* and receive their puts
   service       put fusion/NS/tracks/* and see the subscriptions on it (its declared publishers
-                only send to subscribers they know of); declare the status and snapshot queryables, receive the
-                queries on them and reply; subscribe measurements and truth and receive their
-                puts (for rules on a router the service connects to)
+                only send to subscribers they know of); declare the status and snapshot
+                queryables, receive the queries on them and reply; subscribe measurements and
+                truth and receive their puts (for rules on a router the service connects to)
 
 Hence a sensor cannot forge estimates (its put on tracks is dropped at ingress), cannot answer
 for the service (its status or snapshot queryable is never declared to the node, so no query
@@ -65,7 +65,8 @@ def role_grants(role: str, ns: str, *, sensor_id: str = "") -> list[tuple[str, s
     if role == "recorder":
         return [(SUB, IN, [k["meas"], k["truth"]]), (PUT, OUT, [k["meas"], k["truth"]])]
     if role == "service":
-        return [(PUT, IN, [k["tracks"]]), (SUB, OUT, [k["tracks"]]), (QUERYABLE, IN, queries), (REPLY, IN, queries),
+        return [(PUT, IN, [k["tracks"]]), (SUB, OUT, [k["tracks"]]), (QUERYABLE, IN, queries),
+                (REPLY, IN, queries),
                 (SUB, IN, [k["meas"], k["truth"]]), (PUT, OUT, [k["meas"], k["truth"]]),
                 (QUERY, OUT, queries)]
     raise ValueError(f"unknown role {role!r}")
