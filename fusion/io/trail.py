@@ -34,8 +34,8 @@ def pick(t_ns: Array, pos: Array, r: Array, last: tuple[int, Array, float] | Non
          ) -> tuple[list[int], tuple[int, Array, float] | None]:
     """Rows (in the given order) to draw, and the new last drawn (t_ns, position, radius).
     t_ns (n,), pos (n, k), r (n,): one track's rows; `last`: what was drawn before (or None).
-    Each choice depends on the one before, so this is a loop, over Python floats (a numpy call
-    per row cost ~5 us; this ~0.5)."""
+    Each choice depends on the one before, so this is a loop, over Python floats with math.dist
+    (a numpy call per row cost ~5 us; this ~0.5)."""
     out: list[int] = []
     T, X, R = t_ns.tolist(), np.asarray(pos, dtype=np.float64).tolist(), np.asarray(r, dtype=np.float64).tolist()
     if last is None:
@@ -43,7 +43,7 @@ def pick(t_ns: Array, pos: Array, r: Array, last: tuple[int, Array, float] | Non
     else:
         lt, lp, lr = int(last[0]), np.asarray(last[1], dtype=np.float64).tolist(), float(last[2])
     for i, (ti, pi, ri) in enumerate(zip(T, X, R, strict=True)):
-        if lt is None or (ti > lt and _dist(pi, lp) >= SPACING * (lr + ri)):
+        if lt is None or (ti > lt and math.dist(pi, lp) >= SPACING * (lr + ri)):
             out.append(i)
             lt, lp, lr = ti, pi, ri
     if lt is None:
@@ -51,11 +51,3 @@ def pick(t_ns: Array, pos: Array, r: Array, last: tuple[int, Array, float] | Non
     if out or last is None:
         return out, (lt, np.array(lp, dtype=np.float64), lr)
     return out, last
-
-
-def _dist(p: list[float], q: list[float]) -> float:
-    """|p - q| of two points as lists of floats (2-D: the common case, without a generator)."""
-    if len(p) == 2:
-        dx, dy = p[0] - q[0], p[1] - q[1]
-        return math.sqrt(dx * dx + dy * dy)
-    return math.sqrt(sum((a - b) * (a - b) for a, b in zip(p, q, strict=True)))
