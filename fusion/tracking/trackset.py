@@ -140,8 +140,11 @@ class TrackSet:
     MU: np.ndarray | None
 
     def __init__(self, rows: Rows, layout: Layout) -> None:
+        self._fill({f: getattr(rows, f) for f in ROW_FIELDS}, layout)
+
+    def _fill(self, cols: dict[str, np.ndarray | None], layout: Layout) -> None:
         for f in ROW_FIELDS:
-            setattr(self, f, getattr(rows, f))
+            setattr(self, f, cols[f])
         self.layout = layout
         self._index: dict[int, int] | None = None
         self._views: tuple[Track, ...] | None = None
@@ -150,11 +153,7 @@ class TrackSet:
     def _of(cls, cols: dict[str, np.ndarray | None], layout: Layout) -> TrackSet:
         """A set of the columns `cols` (every field of Rows), without building a Rows first."""
         ts = cls.__new__(cls)
-        for f in ROW_FIELDS:
-            setattr(ts, f, cols[f])
-        ts.layout = layout
-        ts._index = None
-        ts._views = None
+        ts._fill(cols, layout)
         return ts
 
     @classmethod
