@@ -37,10 +37,12 @@ from numpy.typing import ArrayLike
 
 from fusion.core import compiled as _compiled
 from fusion.core import compiled_step as _step
+from fusion.core.compiled_packed import step_packed as _step_packed
 from fusion.core.checks import Array, as_covariance, as_vector
 from fusion.core.gaussian import GaussianState, Update
 from fusion.core.measurement import MeasurementModel
 from fusion.core.motion import LinearMotionModel, MotionModel
+from fusion.core.step_plan import StepPlan
 from fusion.core.timebase import NS_PER_S, dt_seconds
 from fusion.core.transitions import TransitionCache
 from fusion.errors import ConfigError, NumericalError, ShapeError
@@ -204,6 +206,17 @@ class ExtendedKalmanFilter(FilterBase):
         # Scratch of the compiled calls (measurements up to n + 2 components; a larger one takes
         # the numpy path): only ever read inside one call, which holds the GIL.
         self._ws = np.empty(_step.work_size(n, n + 2))
+        self._plans: dict[int, StepPlan] = {}  # id(model) -> its plan (which holds the model)
+
+    @property
+    def check(self) -> bool:
+        """Whether inputs are validated; setting it drops the step plans (which carry the flag)."""
+        return self._check
+
+    @check.setter
+    def check(self, on: bool) -> None:
+        self._check = on
+        self._plans = {}
 
     def predict(self, state: GaussianState, t_ns: int, *, u: ArrayLike | None = None) -> GaussianState:
         """Predict to t_ns (>= state.t_ns); u is the control input if the model takes one."""
@@ -223,25 +236,53 @@ class ExtendedKalmanFilter(FilterBase):
         """Predict to t_ns, then fold z (taken at t_ns) in: update(predict(state, t_ns, u=u), z,
         model, R=R), the same Update bit for bit and the same errors.
 
-        A linear motion model and a model with a compiled twin, z and R float64 arrays, no u: one
-        compiled call (fusion.core.compiled_step.step_model) instead of two; anything else, or
-        anything that call refuses, is the two calls.
+        A linear motion model and a model with a compiled twin (linear for the KF), z a float64
+        vector, no u: one compiled call. With the model's R, the call of the model's StepPlan
+        (fusion.core.step_plan: F, Q, the model and R packed once per time step,
+        fusion.core.compiled_packed); with a given R (a float64 matrix), step_model
+        (fusion.core.compiled_step), which checks it. Anything else, or anything the call
+        refuses, is the two calls.
         """
-        kind = model.kernel_kind
-        cache = self._transitions
-        if kind and cache is not None and u is None and type(z) is _ndarray and z.dtype is _F64 and (
-                z.ndim == 1) and (R is None or (type(R) is _ndarray and R.dtype is _F64 and R.ndim == 2)):
+        plan = self._plans.get(id(model))
+        if (plan is not None and R is None and u is None and plan.model is model and plan.R is model.R
+                and type(z) is _ndarray and z.dtype is _F64 and z.ndim == 1):
             t = int(t_ns)
             d = t - int(state.t_ns)
             if d >= 0:
-                n, m = self._n, model.ndim_meas
-                xn, Pn, y, S = _empty(n), _empty(self._nn), _empty(m), _empty((m, m))
-                if R is None:
-                    Ru, code = model.R, (kind << 2 | _CHECK_Z if self.check else kind << 2)
-                else:
-                    Ru, code = R, (kind << 2 | _CHECK_Z | _CHECK_R if self.check else kind << 2)
-                status, nis, ll = _step_model(code, state.x, state.P, cache[d / NS_PER_S], z, model.kernel_spec,
-                                              Ru, xn, Pn, y, S, self._ws)
+                xn, Pn, y, S = _empty(plan.n), _empty(plan.P_shape), _empty(plan.m), _empty(plan.S_shape)
+                status, nis, ll = _step_packed(state.x, state.P, z, plan[d], xn, Pn, y, S)
+                if status == 0:
+                    return _new(Update, (_new(GaussianState, (xn, Pn, t)), y, S, nis, ll))
+                return self.update(self.predict(state, t_ns), z, model)
+        return self._step_unplanned(state, t_ns, z, model, R, u)
+
+    def _fuses(self, model: MeasurementModel) -> bool:
+        """Whether step may fold z in with model in the same compiled call as the predict."""
+        return bool(model.kernel_kind) and self._transitions is not None
+
+    def _step_unplanned(self, state: GaussianState, t_ns: int, z: ArrayLike, model: MeasurementModel,
+                        R: ArrayLike | None, u: ArrayLike | None) -> Update:
+        """step without a plan for this model: make one (then step with it) where it applies,
+        step_model for a given R, else the two calls."""
+        fuses = self._fuses(model) and u is None
+        if fuses and R is None:
+            plan = self._plans.get(id(model))
+            if plan is None or plan.model is not model or plan.R is not model.R:
+                if len(self._plans) >= 64:
+                    self._plans.clear()
+                self._plans[id(model)] = StepPlan(self._transitions, model, check=self.check)  # type: ignore[arg-type]
+                return self.step(state, t_ns, z, model)
+        kind = model.kernel_kind
+        if fuses and R is not None and type(z) is _ndarray and z.dtype is _F64 and z.ndim == 1 and (
+                type(R) is _ndarray and R.dtype is _F64 and R.ndim == 2):
+            t = int(t_ns)
+            d = t - int(state.t_ns)
+            if d >= 0:
+                m = model.ndim_meas
+                xn, Pn, y, S = _empty(self._n), _empty(self._nn), _empty(m), _empty((m, m))
+                code = kind << 2 | _CHECK_Z | _CHECK_R if self.check else kind << 2
+                status, nis, ll = _step_model(code, state.x, state.P, self._transitions[d / NS_PER_S], z,  # type: ignore[index]
+                                              model.kernel_spec, R, xn, Pn, y, S, self._ws)
                 if status == 0:
                     return _new(Update, (_new(GaussianState, (xn, Pn, t)), y, S, nis, ll))
         return self.update(self.predict(state, t_ns, u=u), z, model, R=R)
@@ -302,8 +343,5 @@ class KalmanFilter(ExtendedKalmanFilter):
             )
         return ExtendedKalmanFilter.update(self, state, z, model, R=R)
 
-    def step(self, state: GaussianState, t_ns: int, z: ArrayLike, model: MeasurementModel, *,
-             R: ArrayLike | None = None, u: ArrayLike | None = None) -> Update:
-        if not model.is_linear:  # the two calls, which refuse it (after predict's own checks)
-            return self.update(self.predict(state, t_ns, u=u), z, model, R=R)
-        return ExtendedKalmanFilter.step(self, state, t_ns, z, model, R=R, u=u)
+    def _fuses(self, model: MeasurementModel) -> bool:
+        return model.is_linear and ExtendedKalmanFilter._fuses(self, model)
