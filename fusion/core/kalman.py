@@ -43,6 +43,8 @@ from fusion.core.gaussian import GaussianState, Update
 from fusion.core.measurement import MeasurementModel
 from fusion.core.motion import LinearMotionModel, MotionModel
 from fusion.core.step_plan import StepPlan
+from fusion.core.step_plan import blob as _blob
+from fusion.core.step_plan import make_plan as _make_plan
 from fusion.core.timebase import NS_PER_S, dt_seconds
 from fusion.core.transitions import TransitionCache
 from fusion.errors import ConfigError, NumericalError, ShapeError
@@ -206,7 +208,7 @@ class ExtendedKalmanFilter(FilterBase):
         # Scratch of the compiled calls (measurements up to n + 2 components; a larger one takes
         # the numpy path): only ever read inside one call, which holds the GIL.
         self._ws = np.empty(_step.work_size(n, n + 2))
-        self._plans: dict[int, StepPlan] = {}  # id(model) -> its plan (which holds the model)
+        self._plans: dict[MeasurementModel, StepPlan] = {}  # fusion.core.step_plan
 
     @property
     def check(self) -> bool:
@@ -243,14 +245,20 @@ class ExtendedKalmanFilter(FilterBase):
         (fusion.core.compiled_step), which checks it. Anything else, or anything the call
         refuses, is the two calls.
         """
-        plan = self._plans.get(id(model))
-        if (plan is not None and R is None and u is None and plan.model is model and plan.R is model.R
-                and type(z) is _ndarray and z.dtype is _F64 and z.ndim == 1):
+        try:
+            blobs, R0, n, shape_P, m, shape_S, _, _, _ = self._plans[model]
+        except (KeyError, TypeError):  # no plan yet, or a model that cannot be a key
+            return self._step_unplanned(state, t_ns, z, model, R, u)
+        if R is None and u is None and R0 is model.R and type(z) is _ndarray and z.dtype is _F64 and z.ndim == 1:
             t = int(t_ns)
             d = t - int(state.t_ns)
-            if d >= 0:
-                xn, Pn, y, S = _empty(plan.n), _empty(plan.P_shape), _empty(plan.m), _empty(plan.S_shape)
-                status, nis, ll = _step_packed(state.x, state.P, z, plan[d], xn, Pn, y, S)
+            try:
+                packed = blobs[d]
+            except KeyError:
+                packed = _blob(self._plans[model], d) if d >= 0 else None
+            if packed is not None:
+                xn, Pn, y, S = _empty(n), _empty(shape_P), _empty(m), _empty(shape_S)
+                status, nis, ll = _step_packed(state.x, state.P, z, packed, xn, Pn, y, S)
                 if status == 0:
                     return _new(Update, (_new(GaussianState, (xn, Pn, t)), y, S, nis, ll))
                 return self.update(self.predict(state, t_ns), z, model)
@@ -266,11 +274,15 @@ class ExtendedKalmanFilter(FilterBase):
         step_model for a given R, else the two calls."""
         fuses = self._fuses(model) and u is None
         if fuses and R is None:
-            plan = self._plans.get(id(model))
-            if plan is None or plan.model is not model or plan.R is not model.R:
+            try:
+                plan = self._plans.get(model)
+                stale = plan is None or plan.R is not model.R
+            except TypeError:  # a model that cannot be a dict key: no plan
+                stale = False
+            if stale:
                 if len(self._plans) >= 64:
                     self._plans.clear()
-                self._plans[id(model)] = StepPlan(self._transitions, model, check=self.check)  # type: ignore[arg-type]
+                self._plans[model] = _make_plan(self._transitions, model, check=self.check)  # type: ignore[arg-type]
                 return self.step(state, t_ns, z, model)
         kind = model.kernel_kind
         if fuses and R is not None and type(z) is _ndarray and z.dtype is _F64 and z.ndim == 1 and (
