@@ -17,29 +17,28 @@ one compiled call that also evaluates h, H, the wrapped residual and the checks 
 given R (fusion.core.compiled_step). What that call refuses goes the numpy way (h, jacobian,
 residual, fusion.core.checks), which raises the typed error, so errors and messages are those of
 the numpy path; results agree with it to rounding (tests/core/test_step_kernels.py).
-`step(state, t_ns, z, model)` is predict then update in one compiled call
-(fusion.core.compiled_step.step_model): the same Update bit for bit, the same errors
-(tests/core/test_filter_step.py), one numba dispatch and one predicted state fewer. The
-compiled calls keep their intermediates in a scratch array the filter owns (no allocation in
-the kernels); every array returned is fresh.
-`predict_arrays` and `update_arrays` are a plain numpy reference of the equations above,
-broadcast over leading dimensions, with the product Joseph form; the tracker does not call them
-(tests/core/test_kernels.py checks the compiled kernels against them, bench/core_step.py times
-them). They agree to rounding.
+`step(state, t_ns, z, model)` is predict then update in one compiled call: with the model's R,
+fusion.core.compiled_packed.step_packed on the plan the filter keeps for that model
+(fusion.core.step_plan: F, Q, the model's parameters and R packed once per time step, so the
+call takes 8 arrays), with a given R fusion.core.compiled_step.step_model. Either gives the same
+Update bit for bit as predict then update and the same errors (tests/core/test_filter_step.py,
+tests/core/test_packed_step.py). The compiled calls keep their intermediates in scratch the
+filter owns (no allocation in the kernels); every array returned is fresh (its own memory,
+shared with no input, no other result and nothing the filter keeps).
+The plain numpy reference of the equations (predict_arrays, update_arrays) and the checked
+compiled update of one state (update_single) are in fusion.core.kalman_reference, re-exported.
 """
-
 from __future__ import annotations
-
-import math
 
 import numpy as np
 from numpy.typing import ArrayLike
 
 from fusion.core import compiled as _compiled
 from fusion.core import compiled_step as _step
-from fusion.core.compiled_packed import step_packed as _step_packed
 from fusion.core.checks import Array, as_covariance, as_vector
+from fusion.core.compiled_packed import step_packed as _step_packed
 from fusion.core.gaussian import GaussianState, Update
+from fusion.core.kalman_reference import LOG_2PI, predict_arrays, update_arrays, update_single
 from fusion.core.measurement import MeasurementModel
 from fusion.core.motion import LinearMotionModel, MotionModel
 from fusion.core.step_plan import StepPlan
@@ -49,95 +48,15 @@ from fusion.core.timebase import NS_PER_S, dt_seconds
 from fusion.core.transitions import TransitionCache
 from fusion.errors import ConfigError, NumericalError, ShapeError
 
-LOG_2PI = math.log(2.0 * math.pi)
+__all__ = ["LOG_2PI", "ExtendedKalmanFilter", "FilterBase", "KalmanFilter", "predict_arrays", "update_arrays",
+           "update_single"]
+
 _F64 = np.dtype(np.float64)
 _empty = np.empty
 _ndarray = np.ndarray
 _predict_fq, _update_model, _step_model = _step.predict_fq, _step.update_model, _step.step_model
 _NONFINITE, _CHECK_Z, _CHECK_R = _step.NONFINITE, _step.CHECK_Z, _step.CHECK_R
 _new = tuple.__new__  # GaussianState and Update are named tuples: built without their __new__
-
-
-def _swap(a: Array) -> Array:
-    return np.swapaxes(a, -1, -2)
-
-
-def predict_arrays(x: Array, P: Array, F: Array, Q: Array, fx: Array | None = None) -> tuple[Array, Array]:
-    """x- = F x (or fx, the nonlinear f(x) when given); P- = F P F' + Q, symmetrised."""
-    xp = (F @ x[..., None])[..., 0] if fx is None else fx
-    Pp = F @ P @ _swap(F) + Q
-    return xp, 0.5 * (Pp + _swap(Pp))
-
-
-def _forward(L: Array, B: Array) -> Array:
-    """L^-1 B for lower-triangular L (..., m, m) and B (..., m, k), by forward substitution."""
-    X = np.empty_like(B)
-    for i in range(L.shape[-1]):
-        acc = B[..., i, :]
-        if i:
-            acc = acc - np.einsum("...k,...kj->...j", L[..., i, :i], X[..., :i, :])
-        X[..., i, :] = acc / L[..., i, i, None]
-    return X
-
-
-def _backward(L: Array, B: Array) -> Array:
-    """L'^-1 B for lower-triangular L (..., m, m) and B (..., m, k), by back substitution."""
-    m = L.shape[-1]
-    X = np.empty_like(B)
-    for i in range(m - 1, -1, -1):
-        acc = B[..., i, :]
-        if i < m - 1:
-            acc = acc - np.einsum("...k,...kj->...j", L[..., i + 1:, i], X[..., i + 1:, :])
-        X[..., i, :] = acc / L[..., i, i, None]
-    return X
-
-
-def update_arrays(
-    x: Array, P: Array, y: Array, H: Array, R: Array
-) -> tuple[Array, Array, Array, Array, Array]:
-    """Joseph-form update given the innovation y; returns x+, P+, S, NIS, log-likelihood.
-
-    Raises NumericalError where S is not positive definite.
-    """
-    PHt = P @ _swap(H)
-    S = H @ PHt + R
-    S = 0.5 * (S + _swap(S))
-    try:
-        L = np.linalg.cholesky(S)
-    except np.linalg.LinAlgError:
-        raise NumericalError(
-            "innovation covariance S = H P H' + R is not positive definite; "
-            "check R and the track covariance P"
-        ) from None
-    # One forward substitution with L for [H P | y], one back substitution with L' for the gain:
-    # K' = L'^-1 L^-1 H P. Row by row (m <= 6 rows), vectorised over the stack: several times
-    # cheaper than a stacked general solve on these sizes.
-    m = y.shape[-1]
-    rhs = np.concatenate([_swap(PHt), y[..., None]], axis=-1)
-    W = _forward(L, rhs)
-    Kt = _backward(L, W[..., :-1])
-    w = W[..., -1]
-    nis = np.einsum("...i,...i->...", w, w)
-    logdet = 2.0 * np.log(np.diagonal(L, axis1=-2, axis2=-1)).sum(axis=-1)
-    loglik = -0.5 * (nis + logdet + m * LOG_2PI)
-    K = _swap(Kt)
-    xn = x + (K @ y[..., None])[..., 0]
-    IKH = np.eye(x.shape[-1]) - K @ H
-    Pn = IKH @ P @ _swap(IKH) + K @ R @ Kt
-    return xn, 0.5 * (Pn + _swap(Pn)), S, nis, loglik
-
-
-def update_single(x: Array, P: Array, y: Array, H: Array, R: Array) -> tuple[Array, Array, Array, float, float]:
-    """`update_arrays` for one state: the compiled kernel (fusion.core.compiled) on float64
-    arrays. Raises NumericalError where S is not positive definite."""
-    ok, xn, Pn, S, nis, ll = _compiled.update(
-        x, P, y, np.ascontiguousarray(H, dtype=np.float64), np.ascontiguousarray(R, dtype=np.float64))
-    if not ok:
-        raise NumericalError(
-            "innovation covariance S = H P H' + R is not positive definite; "
-            "check R and the track covariance P"
-        )
-    return xn, Pn, S, nis, ll
 
 
 class FilterBase:
