@@ -201,8 +201,9 @@ class ExtendedKalmanFilter(FilterBase):
             if stale:
                 if len(self._plans) >= 64:
                     self._plans.clear()
-                self._plans[model] = _make_plan(self._transitions, model, check=self.check)  # type: ignore[arg-type]
-                return self.step(state, t_ns, z, model)
+                plan = self._plans[model] = _make_plan(self._transitions, model, check=self.check)  # type: ignore[arg-type]
+                if plan.R is model.R:  # (an R made afresh on every read would never find its plan)
+                    return self.step(state, t_ns, z, model)
         kind = model.kernel_kind
         if fuses and R is not None and type(z) is _ndarray and z.dtype is _F64 and z.ndim == 1 and (
                 type(R) is _ndarray and R.dtype is _F64 and R.ndim == 2):

@@ -182,3 +182,26 @@ def test_plan_follows_a_new_R_and_the_check_flag() -> None:
     kf.check = True
     with pytest.raises(NonFiniteError, match="z holds NaN or inf"):
         kf.step(s, 10**8, np.array([NAN, 0.0]), meas)
+
+
+class FreshR(Radar2D):
+    """A model that opts into the compiled twin but makes its R afresh on every read."""
+
+    kernel_kind = Radar2D.kernel_kind
+
+    @property
+    def R(self) -> np.ndarray:  # type: ignore[override]
+        return np.diag([100.0, 1e-4])
+
+    @R.setter
+    def R(self, value: np.ndarray) -> None:
+        pass
+
+
+def test_a_model_whose_R_is_made_afresh_takes_the_two_calls() -> None:
+    meas = FreshR(R=[100.0, 1e-4])
+    f = ExtendedKalmanFilter(ConstantVelocity(ndim=2, q=0.5))
+    s = _start(4, np.random.default_rng(2))
+    z = meas.h(s.x)
+    for _ in range(3):
+        _same(f.step(s, 10**8, z, meas), f.update(f.predict(s, 10**8), z, meas))
