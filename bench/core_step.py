@@ -7,8 +7,10 @@ the textbook loop use (I - K H) P, so they agree with fusion's Joseph form to ro
 fusion runs through its public API, inputs validated unless check=False: "fusion KF" / "fusion
 EKF" time KalmanFilter / ExtendedKalmanFilter .predict then .update (two calls, as the tracker's
 per-pair path and a single-track user do); "step()" rows time the fused .step(state, t_ns, z,
-model) (one call, the same Update bit for bit). The floor row is the two compiled calls of the
-two-call path without the methods around them.
+model) (one call, the same Update bit for bit). The floor rows are the compiled calls without
+the methods around them: "kernels alone" the two of the two-call path, "step kernel alone" the
+one of step() (fusion.core.compiled_packed.step_packed on the filter's plan for the model,
+fusion.core.step_plan), on fresh result arrays.
 
 Timing: CPU time of this process (time.process_time), so that the time spent waiting for a core
 of the shared machine is not counted; the implementations are interleaved (each repeat times
@@ -30,15 +32,18 @@ from collections.abc import Callable
 import numpy as np
 
 from fusion.core import compiled_step
+from fusion.core.compiled_packed import step_packed
 from fusion.core.kalman import ExtendedKalmanFilter, KalmanFilter, predict_arrays, update_arrays
 from fusion.core.measurement import CartesianPosition, Radar2D, wrap_angle
 from fusion.core.motion import ConstantVelocity
+from fusion.core.step_plan import blob, make_plan
 from fusion.core.transitions import TransitionCache
 from fusion.scenarios import reference
 
 DT = 0.1
 DT_NS = 100_000_000
 FLOOR = "kernels alone (floor)"
+STEP_FLOOR = "step kernel alone (floor)"
 
 
 def floor_setup(cv: ConstantVelocity, meas: CartesianPosition | Radar2D, Z: np.ndarray, x0: np.ndarray,
@@ -57,6 +62,22 @@ def floor_setup(cv: ConstantVelocity, meas: CartesianPosition | Radar2D, Z: np.n
         xn, Pn, y, S = np.empty(n), np.empty((n, n)), np.empty(m), np.empty((m, m))
         compiled_step.update_model(meas.kernel_kind << 2 | compiled_step.CHECK_Z, x, P, Z[k % len(Z)],
                                    meas.kernel_spec, meas.R, xn, Pn, y, S, ws)
+        st["x"], st["P"] = xn, Pn
+
+    return step, lambda: st["x"]
+
+
+def step_floor_setup(cv: ConstantVelocity, meas: CartesianPosition | Radar2D, Z: np.ndarray, x0: np.ndarray,
+                     P0: np.ndarray) -> tuple[Callable[[int], None], Callable[[], np.ndarray]]:
+    """The one compiled call of the public step() (a validating filter's plan for meas at dt),
+    on fresh arrays, without the method around it."""
+    packed = blob(make_plan(TransitionCache(cv), meas, check=True), DT_NS)
+    n, m = x0.shape[0], meas.ndim_meas
+    st = {"x": x0.copy(), "P": P0.copy()}
+
+    def step(k: int) -> None:
+        xn, Pn, y, S = np.empty(n), np.empty((n, n)), np.empty(m), np.empty((m, m))
+        step_packed(st["x"], st["P"], Z[k % len(Z)], packed, xn, Pn, y, S)
         st["x"], st["P"] = xn, Pn
 
     return step, lambda: st["x"]
@@ -129,6 +150,7 @@ def kf_setups(n: int, seed: int = 0) -> dict[str, tuple[Callable[[int], None], C
 
     setups["textbook numpy"] = (np_step, lambda: st["x"])
     setups[FLOOR] = floor_setup(cv, meas, Z, x0, P0)
+    setups[STEP_FLOOR] = step_floor_setup(cv, meas, Z, x0, P0)
     return setups
 
 
@@ -198,6 +220,7 @@ def ekf_setups(n: int) -> dict[str, tuple[Callable[[int], None], Callable[[], np
 
     setups["textbook numpy"] = (np_step, lambda: st["x"])
     setups[FLOOR] = floor_setup(cv, meas, Z, x0, P0)
+    setups[STEP_FLOOR] = step_floor_setup(cv, meas, Z, x0, P0)
     return setups
 
 

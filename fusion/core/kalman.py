@@ -17,20 +17,18 @@ one compiled call that also evaluates h, H, the wrapped residual and the checks 
 given R (fusion.core.compiled_step). What that call refuses goes the numpy way (h, jacobian,
 residual, fusion.core.checks), which raises the typed error, so errors and messages are those of
 the numpy path; results agree with it to rounding (tests/core/test_step_kernels.py).
-`step(state, t_ns, z, model)` is predict then update in one compiled call
-(fusion.core.compiled_step.step_model): the same Update bit for bit, the same errors
-(tests/core/test_filter_step.py), one numba dispatch and one predicted state fewer. The
-compiled calls keep their intermediates in a scratch array the filter owns (no allocation in
-the kernels); every array returned is fresh.
-`predict_arrays` and `update_arrays` are a plain numpy reference of the equations above,
-broadcast over leading dimensions, with the product Joseph form; the tracker does not call them
-(tests/core/test_kernels.py checks the compiled kernels against them, bench/core_step.py times
-them). They agree to rounding.
+`step(state, t_ns, z, model)` is predict then update in one compiled call: with the model's R,
+fusion.core.compiled_packed.step_packed on the plan the filter keeps for that model
+(fusion.core.step_plan: F, Q, the model's parameters and R packed once per time step, so the
+call takes 8 arrays), with a given R fusion.core.compiled_step.step_model. Either gives the same
+Update bit for bit as predict then update and the same errors (tests/core/test_filter_step.py,
+tests/core/test_packed_step.py). The compiled calls keep their intermediates in scratch the
+filter owns (no allocation in the kernels); every array returned is fresh (its own memory,
+shared with no input, no other result and nothing the filter keeps).
+The plain numpy reference of the equations (predict_arrays, update_arrays) and the checked
+compiled update of one state (update_single) are in fusion.core.kalman_reference, re-exported.
 """
-
 from __future__ import annotations
-
-import math
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -38,102 +36,27 @@ from numpy.typing import ArrayLike
 from fusion.core import compiled as _compiled
 from fusion.core import compiled_step as _step
 from fusion.core.checks import Array, as_covariance, as_vector
+from fusion.core.compiled_packed import step_packed as _step_packed
 from fusion.core.gaussian import GaussianState, Update
+from fusion.core.kalman_reference import LOG_2PI, predict_arrays, update_arrays, update_single
 from fusion.core.measurement import MeasurementModel
 from fusion.core.motion import LinearMotionModel, MotionModel
+from fusion.core.step_plan import StepPlan
+from fusion.core.step_plan import blob as _blob
+from fusion.core.step_plan import make_plan as _make_plan
 from fusion.core.timebase import NS_PER_S, dt_seconds
 from fusion.core.transitions import TransitionCache
 from fusion.errors import ConfigError, NumericalError, ShapeError
 
-LOG_2PI = math.log(2.0 * math.pi)
+__all__ = ["LOG_2PI", "ExtendedKalmanFilter", "FilterBase", "KalmanFilter", "predict_arrays", "update_arrays",
+           "update_single"]
+
 _F64 = np.dtype(np.float64)
 _empty = np.empty
 _ndarray = np.ndarray
 _predict_fq, _update_model, _step_model = _step.predict_fq, _step.update_model, _step.step_model
 _NONFINITE, _CHECK_Z, _CHECK_R = _step.NONFINITE, _step.CHECK_Z, _step.CHECK_R
 _new = tuple.__new__  # GaussianState and Update are named tuples: built without their __new__
-
-
-def _swap(a: Array) -> Array:
-    return np.swapaxes(a, -1, -2)
-
-
-def predict_arrays(x: Array, P: Array, F: Array, Q: Array, fx: Array | None = None) -> tuple[Array, Array]:
-    """x- = F x (or fx, the nonlinear f(x) when given); P- = F P F' + Q, symmetrised."""
-    xp = (F @ x[..., None])[..., 0] if fx is None else fx
-    Pp = F @ P @ _swap(F) + Q
-    return xp, 0.5 * (Pp + _swap(Pp))
-
-
-def _forward(L: Array, B: Array) -> Array:
-    """L^-1 B for lower-triangular L (..., m, m) and B (..., m, k), by forward substitution."""
-    X = np.empty_like(B)
-    for i in range(L.shape[-1]):
-        acc = B[..., i, :]
-        if i:
-            acc = acc - np.einsum("...k,...kj->...j", L[..., i, :i], X[..., :i, :])
-        X[..., i, :] = acc / L[..., i, i, None]
-    return X
-
-
-def _backward(L: Array, B: Array) -> Array:
-    """L'^-1 B for lower-triangular L (..., m, m) and B (..., m, k), by back substitution."""
-    m = L.shape[-1]
-    X = np.empty_like(B)
-    for i in range(m - 1, -1, -1):
-        acc = B[..., i, :]
-        if i < m - 1:
-            acc = acc - np.einsum("...k,...kj->...j", L[..., i + 1:, i], X[..., i + 1:, :])
-        X[..., i, :] = acc / L[..., i, i, None]
-    return X
-
-
-def update_arrays(
-    x: Array, P: Array, y: Array, H: Array, R: Array
-) -> tuple[Array, Array, Array, Array, Array]:
-    """Joseph-form update given the innovation y; returns x+, P+, S, NIS, log-likelihood.
-
-    Raises NumericalError where S is not positive definite.
-    """
-    PHt = P @ _swap(H)
-    S = H @ PHt + R
-    S = 0.5 * (S + _swap(S))
-    try:
-        L = np.linalg.cholesky(S)
-    except np.linalg.LinAlgError:
-        raise NumericalError(
-            "innovation covariance S = H P H' + R is not positive definite; "
-            "check R and the track covariance P"
-        ) from None
-    # One forward substitution with L for [H P | y], one back substitution with L' for the gain:
-    # K' = L'^-1 L^-1 H P. Row by row (m <= 6 rows), vectorised over the stack: several times
-    # cheaper than a stacked general solve on these sizes.
-    m = y.shape[-1]
-    rhs = np.concatenate([_swap(PHt), y[..., None]], axis=-1)
-    W = _forward(L, rhs)
-    Kt = _backward(L, W[..., :-1])
-    w = W[..., -1]
-    nis = np.einsum("...i,...i->...", w, w)
-    logdet = 2.0 * np.log(np.diagonal(L, axis1=-2, axis2=-1)).sum(axis=-1)
-    loglik = -0.5 * (nis + logdet + m * LOG_2PI)
-    K = _swap(Kt)
-    xn = x + (K @ y[..., None])[..., 0]
-    IKH = np.eye(x.shape[-1]) - K @ H
-    Pn = IKH @ P @ _swap(IKH) + K @ R @ Kt
-    return xn, 0.5 * (Pn + _swap(Pn)), S, nis, loglik
-
-
-def update_single(x: Array, P: Array, y: Array, H: Array, R: Array) -> tuple[Array, Array, Array, float, float]:
-    """`update_arrays` for one state: the compiled kernel (fusion.core.compiled) on float64
-    arrays. Raises NumericalError where S is not positive definite."""
-    ok, xn, Pn, S, nis, ll = _compiled.update(
-        x, P, y, np.ascontiguousarray(H, dtype=np.float64), np.ascontiguousarray(R, dtype=np.float64))
-    if not ok:
-        raise NumericalError(
-            "innovation covariance S = H P H' + R is not positive definite; "
-            "check R and the track covariance P"
-        )
-    return xn, Pn, S, nis, ll
 
 
 class FilterBase:
@@ -204,6 +127,17 @@ class ExtendedKalmanFilter(FilterBase):
         # Scratch of the compiled calls (measurements up to n + 2 components; a larger one takes
         # the numpy path): only ever read inside one call, which holds the GIL.
         self._ws = np.empty(_step.work_size(n, n + 2))
+        self._plans: dict[MeasurementModel, StepPlan] = {}  # fusion.core.step_plan
+
+    @property
+    def check(self) -> bool:
+        """Whether inputs are validated; setting it drops the step plans (which carry the flag)."""
+        return self._check
+
+    @check.setter
+    def check(self, on: bool) -> None:
+        self._check = on
+        self._plans = {}
 
     def predict(self, state: GaussianState, t_ns: int, *, u: ArrayLike | None = None) -> GaussianState:
         """Predict to t_ns (>= state.t_ns); u is the control input if the model takes one."""
@@ -223,25 +157,64 @@ class ExtendedKalmanFilter(FilterBase):
         """Predict to t_ns, then fold z (taken at t_ns) in: update(predict(state, t_ns, u=u), z,
         model, R=R), the same Update bit for bit and the same errors.
 
-        A linear motion model and a model with a compiled twin, z and R float64 arrays, no u: one
-        compiled call (fusion.core.compiled_step.step_model) instead of two; anything else, or
-        anything that call refuses, is the two calls.
+        A linear motion model and a model with a compiled twin (linear for the KF), z a float64
+        vector, no u: one compiled call. With the model's R, the call of the model's StepPlan
+        (fusion.core.step_plan: F, Q, the model and R packed once per time step,
+        fusion.core.compiled_packed); with a given R (a float64 matrix), step_model
+        (fusion.core.compiled_step), which checks it. Anything else, or anything the call
+        refuses, is the two calls.
         """
+        try:
+            blobs, R0, n, shape_P, m, shape_S, _, _, _ = self._plans[model]
+        except (KeyError, TypeError):  # no plan yet, or a model that cannot be a key
+            return self._step_unplanned(state, t_ns, z, model, R, u)
+        if R is None and u is None and R0 is model.R and type(z) is _ndarray and z.dtype is _F64 and z.ndim == 1:
+            t = int(t_ns)
+            d = t - int(state.t_ns)
+            try:
+                packed = blobs[d]
+            except KeyError:
+                packed = _blob(self._plans[model], d) if d >= 0 else None
+            if packed is not None:
+                xn, Pn, y, S = _empty(n), _empty(shape_P), _empty(m), _empty(shape_S)
+                status, nis, ll = _step_packed(state.x, state.P, z, packed, xn, Pn, y, S)
+                if status == 0:
+                    return _new(Update, (_new(GaussianState, (xn, Pn, t)), y, S, nis, ll))
+                return self.update(self.predict(state, t_ns), z, model)
+        return self._step_unplanned(state, t_ns, z, model, R, u)
+
+    def _fuses(self, model: MeasurementModel) -> bool:
+        """Whether step may fold z in with model in the same compiled call as the predict."""
+        return bool(model.kernel_kind) and self._transitions is not None
+
+    def _step_unplanned(self, state: GaussianState, t_ns: int, z: ArrayLike, model: MeasurementModel,
+                        R: ArrayLike | None, u: ArrayLike | None) -> Update:
+        """step without a plan for this model: make one (then step with it) where it applies,
+        step_model for a given R, else the two calls."""
+        fuses = self._fuses(model) and u is None
+        if fuses and R is None:
+            try:
+                plan = self._plans.get(model)
+                stale = plan is None or plan.R is not model.R
+            except TypeError:  # a model that cannot be a dict key: no plan
+                stale = False
+            if stale:
+                if len(self._plans) >= 64:
+                    self._plans.clear()
+                plan = self._plans[model] = _make_plan(self._transitions, model, check=self.check)  # type: ignore[arg-type]
+                if plan.R is model.R:  # (an R made afresh on every read would never find its plan)
+                    return self.step(state, t_ns, z, model)
         kind = model.kernel_kind
-        cache = self._transitions
-        if kind and cache is not None and u is None and type(z) is _ndarray and z.dtype is _F64 and (
-                z.ndim == 1) and (R is None or (type(R) is _ndarray and R.dtype is _F64 and R.ndim == 2)):
+        if fuses and R is not None and type(z) is _ndarray and z.dtype is _F64 and z.ndim == 1 and (
+                type(R) is _ndarray and R.dtype is _F64 and R.ndim == 2):
             t = int(t_ns)
             d = t - int(state.t_ns)
             if d >= 0:
-                n, m = self._n, model.ndim_meas
-                xn, Pn, y, S = _empty(n), _empty(self._nn), _empty(m), _empty((m, m))
-                if R is None:
-                    Ru, code = model.R, (kind << 2 | _CHECK_Z if self.check else kind << 2)
-                else:
-                    Ru, code = R, (kind << 2 | _CHECK_Z | _CHECK_R if self.check else kind << 2)
-                status, nis, ll = _step_model(code, state.x, state.P, cache[d / NS_PER_S], z, model.kernel_spec,
-                                              Ru, xn, Pn, y, S, self._ws)
+                m = model.ndim_meas
+                xn, Pn, y, S = _empty(self._n), _empty(self._nn), _empty(m), _empty((m, m))
+                code = kind << 2 | _CHECK_Z | _CHECK_R if self.check else kind << 2
+                status, nis, ll = _step_model(code, state.x, state.P, self._transitions[d / NS_PER_S], z,  # type: ignore[index]
+                                              model.kernel_spec, R, xn, Pn, y, S, self._ws)
                 if status == 0:
                     return _new(Update, (_new(GaussianState, (xn, Pn, t)), y, S, nis, ll))
         return self.update(self.predict(state, t_ns, u=u), z, model, R=R)
@@ -302,8 +275,5 @@ class KalmanFilter(ExtendedKalmanFilter):
             )
         return ExtendedKalmanFilter.update(self, state, z, model, R=R)
 
-    def step(self, state: GaussianState, t_ns: int, z: ArrayLike, model: MeasurementModel, *,
-             R: ArrayLike | None = None, u: ArrayLike | None = None) -> Update:
-        if not model.is_linear:  # the two calls, which refuse it (after predict's own checks)
-            return self.update(self.predict(state, t_ns, u=u), z, model, R=R)
-        return ExtendedKalmanFilter.step(self, state, t_ns, z, model, R=R, u=u)
+    def _fuses(self, model: MeasurementModel) -> bool:
+        return model.is_linear and ExtendedKalmanFilter._fuses(self, model)

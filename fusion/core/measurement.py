@@ -118,11 +118,14 @@ class MeasurementModel(ABC):
 
 
 def noise_covariance(R: ArrayLike, m: int) -> Array:
-    """R as a validated m x m covariance; a vector is its diagonal."""
+    """R as a validated m x m covariance (a vector is its diagonal): a read-only array of its own,
+    as a model's configuration does not change after construction (the filters keep copies)."""
     R = np.asarray(R, dtype=np.float64)
     if R.ndim == 1:
         R = np.diag(R)
-    return as_covariance("R", R, m)
+    out = as_covariance("R", R, m)  # a new array (the symmetrised R), never the caller's
+    out.flags.writeable = False
+    return out
 
 
 class CartesianPosition(MeasurementModel):
