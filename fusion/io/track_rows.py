@@ -190,7 +190,7 @@ class Rows:
         prior = stack([c.X[r] if e.prior_x is None else e.prior_x for r, e in zip(rows.tolist(), es, strict=True)])
         mt = c.matched[rows]
         meas = [k for k, e in enumerate(es) if e.meas_pos is not None]
-        meas_pos = np.array([es[k].meas_pos[: len(self.pi)] for k in meas], dtype=np.float64)  # type: ignore[index]
+        meas_pos = stack([es[k].meas_pos[: len(self.pi)] for k in meas])  # type: ignore[index]
         for a, i in enumerate(self.pi):
             ax = self.axes[a]
             # the prediction first: a plot draws its series in order, the estimate goes on top
