@@ -96,7 +96,7 @@ class RerunSink:
         self._steps: list[tuple[tuple, tuple, int, int | None]] = []  # (measurements, associations, step, arrival)
         self.flushes = 0  # flushes so far (fusion.io.recording looks at the file's size after each)
         self._truth_rows: list[tuple[int, int, Array, str]] = []
-        self._scored: list[Any] = []  # the viewed tracks' rows (track_rows._Stacked) since the last view flush
+        self._scored: list[Any] = []  # the viewed tracks' rows (fusion.io.view_rows.Stacked) since the last view flush
         self._pending = 0
         self.rows_written = 0
         self._flush_rows = flush_rows
