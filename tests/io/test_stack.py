@@ -39,5 +39,14 @@ def test_other_inputs_converted() -> None:
     assert np.array_equal(stack([np.ones(2).astype(">f8"), np.ones(2)]), np.ones((2, 2)))
 
 
+def test_rows_of_different_shapes_refused() -> None:
+    with pytest.raises(ValueError):
+        stack([np.zeros(4), np.zeros(6), np.zeros(2)])  # the bytes of three rows of 4: still refused
+    with pytest.raises(ValueError):
+        stack([np.zeros((2, 2)), np.zeros(4)])
+    with pytest.raises(ValueError):
+        stack([[1.0, 2.0], [1.0]])
+
+
 def test_none_given_shape() -> None:
     assert stack([], (3, 3)).shape == (0, 3, 3)
