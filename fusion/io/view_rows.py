@@ -25,6 +25,15 @@ class Fields:
     cache, not again a view interval later, once per field)."""
 
     __slots__ = _FIELDS
+    prior_x: list[Array | None]
+    meas_pos: list[Array | None]
+    y: list[Array | None]
+    S: list[Array | None]
+    nis: list[float | None]
+    sensor_id: list[str]
+    H: list[Array | None]
+    prior_P: list[Array | None]
+    mode_probabilities: list[Array | None]
 
     def __init__(self, cols: list[list[Any]]) -> None:
         for name, col in zip(_FIELDS, cols, strict=True):
