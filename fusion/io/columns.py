@@ -134,13 +134,27 @@ class Column:
 
 
 def stack(rows: Sequence[Array], shape: tuple[int, ...] | None = None) -> Array:
-    """Equal-shaped arrays (n of them) as one float64 array (n, *shape): one concatenate, then a
-    reshape (np.array over a list of small 2-D arrays cost 0.6-1.8 us per array here, this ~0.15).
+    """Equal-shaped arrays (n of them) as one float64 array (n, *shape), like np.stack (rows of
+    different shapes raise ValueError). Float64 C-contiguous arrays (what the tracker's estimates
+    hold) are joined as bytes into one buffer (~0.1 us per array here, against ~0.3-0.5 for
+    np.concatenate and 0.6-1.8 for np.array over the list); anything else goes through np.stack.
     `shape` is the arrays' shape, needed when there may be none."""
     if not len(rows):
         return np.empty((0, *(shape or (0,))), dtype=np.float64)
     first = np.asarray(rows[0])
-    return np.concatenate(rows).reshape(len(rows), *first.shape).astype(np.float64, copy=False)
+    if first.dtype == _F64:
+        try:
+            buf = bytearray().join(rows)  # type: ignore[arg-type]  # raises on lists, non-contiguous arrays
+        except (TypeError, ValueError, BufferError):
+            buf = None
+        # every row float64 and of the first's shape: the bytes are the rows' values, in order
+        if (buf is not None and len(buf) == len(rows) * first.nbytes and {r.dtype for r in rows} == {_F64}
+                and {r.shape for r in rows} == {first.shape}):
+            return np.frombuffer(buf, dtype=np.float64).reshape(len(rows), *first.shape)
+    return np.stack(rows).astype(np.float64, copy=False)
+
+
+_F64 = np.dtype(np.float64)
 
 
 def time_column(rr: Any, name: str, t_ns: Sequence[int] | Array, *, epoch: bool) -> Any:

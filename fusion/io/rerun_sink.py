@@ -50,7 +50,7 @@ import numpy as np
 
 from fusion.core.checks import Array
 from fusion.io import blueprint, step_rows, track_rows
-from fusion.io.columns import Column, components, time_column
+from fusion.io.columns import Column, components, stack, time_column
 from fusion.io.derive import world
 from fusion.io.labels import is_epoch, short_id
 from fusion.io.palette import colour
@@ -96,7 +96,7 @@ class RerunSink:
         self._steps: list[tuple[tuple, tuple, int, int | None]] = []  # (measurements, associations, step, arrival)
         self.flushes = 0  # flushes so far (fusion.io.recording looks at the file's size after each)
         self._truth_rows: list[tuple[int, int, Array, str]] = []
-        self._scored: list[Any] = []  # the viewed tracks' rows (track_rows._Stacked) since the last view flush
+        self._scored: list[Any] = []  # the viewed tracks' rows (fusion.io.view_rows.Stacked) since the last view flush
         self._pending = 0
         self.rows_written = 0
         self._flush_rows = flush_rows
@@ -261,7 +261,7 @@ class RerunSink:
         truth, self._truth_rows = self._truth_rows, []
         if truth:
             t_t = [r[0] for r in truth]
-            S = np.array([r[2] for r in truth], dtype=np.float64)
+            S = stack([r[2] for r in truth])  # the states as logged: float64 (Rows.add_truth)
             self.col("record/truth", "record").extend(t_t, [r[1] for r in truth], t_t, blocks={"x": S},
                                                       target=[r[3] for r in truth])  # float64: for inspect
             W = world(S[:, self.rows.pi])

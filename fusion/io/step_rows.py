@@ -36,53 +36,61 @@ def associations(steps: Sequence[Step], sink: Any) -> None:
     A = [a for _, As, _, _ in steps for a in As]
     if not A:
         return
-    step_a = [step for _, As, step, _ in steps for _ in As]
-    t_a = [a.t_ns for a in A]
-    arr_a = [t if arr is None else arr for (_, As, _, arr) in steps for t in [a.t_ns for a in As]]
+    step_a: list[int] = []
+    arr_a: list[int] = []
+    for _, As, step, arr in steps:
+        step_a += [step] * len(As)
+        arr_a += [a.t_ns for a in As] if arr is None else [arr] * len(As)
     gated = [a.gated for a in A]
     flat = [short_id(g) for gs in gated for g in gs]
     offsets = np.zeros(len(A) + 1, dtype=np.int32)
     np.cumsum([len(gs) for gs in gated], out=offsets[1:])
     sink.col("record/associations", "record").extend(
-        t_a, step_a, arr_a, sensor=[a.sensor_id for a in A], seq=[a.seq for a in A],
-        outcome=[a.outcome.value for a in A],
+        [a.t_ns for a in A], step_a, arr_a, sensor=[a.sensor_id for a in A], seq=[a.seq for a in A],
+        outcome=[a.outcome for a in A],  # an Outcome is a str (StrEnum): arrow takes its value as it is
         label=["" if a.track_id is None else short_id(a.track_id) for a in A],
         gated=pa.ListArray.from_arrays(pa.array(offsets), pa.array(flat, pa.string())),
         nis=[np.nan if a.nis is None else float(a.nis) for a in A])
 
 
 def measured_points(steps: Sequence[Step], sink: Any) -> None:
-    """The measured points of `steps`, per sensor (see the module docstring)."""
-    # the measurements an association used (_USED) in their step, per sensor: step << 64 | seq
-    used_keys: dict[str, set[int]] = {}
-    for _, As, step, _ in steps:
-        for a in As:
-            if a.outcome in _USED:
-                used_keys.setdefault(a.sensor_id, set()).add((step << 64) | (a.seq & _SEQ_MASK))
-    by_sensor: dict[str, tuple[list[int], list[Any], list[int | None]]] = {}
-    for ms, _, step, arr in steps:
-        for m in ms:
-            b = by_sensor.get(m.sensor_id)
+    """The measured points of `steps`, per sensor (see the module docstring). A step's
+    measurements are taken per sensor in blocks (one sensor per step, as a scan is, but any mix
+    is split); a point is associated when an association of its step, sensor and seq is _USED."""
+    by_sensor: dict[str, tuple[list[int], list[Any], list[int | None], list[bool]]] = {}
+    for ms, As, step, arr in steps:
+        if not ms:
+            continue
+        first = ms[0].sensor_id
+        if all(m.sensor_id == first for m in ms):
+            groups: Any = ((first, ms),)
+        else:
+            split: dict[str, list[Any]] = {}
+            for m in ms:
+                split.setdefault(m.sensor_id, []).append(m)
+            groups = split.items()
+        for sensor_id, g in groups:
+            b = by_sensor.get(sensor_id)
             if b is None:
-                b = by_sensor[m.sensor_id] = ([], [], [])
-            b[0].append(step)
-            b[1].append(m)
-            b[2].append(arr)
+                b = by_sensor[sensor_id] = ([], [], [], [])
+            used_seqs = {a.seq & _SEQ_MASK for a in As if a.outcome in _USED and a.sensor_id == sensor_id}
+            b[0].extend([step] * len(g))
+            b[1].extend(g)
+            b[2].extend([arr] * len(g))
+            b[3].extend([(m.seq & _SEQ_MASK) in used_seqs for m in g] if used_seqs else [False] * len(g))
     for sensor_id in sorted(by_sensor):
-        steps_m, ms_, arrs = by_sensor[sensor_id]
+        steps_m, ms_, arrs, used_m = by_sensor[sensor_id]
         step_m = np.array(steps_m, dtype=np.int64)
         t_m = np.fromiter((m.t_ns for m in ms_), dtype=np.int64, count=len(ms_))
         order = np.lexsort((t_m, step_m))  # by step, then scan time; stable: a scan's order kept
-        keys = used_keys.get(sensor_id, set())
-        used = np.fromiter(((s << 64) | (m.seq & _SEQ_MASK) in keys for s, m in zip(steps_m, ms_, strict=True)),
-                           dtype=bool, count=len(ms_))[order]
+        used = np.array(used_m, dtype=bool)[order]
         step_m, t_m = step_m[order], t_m[order]
         P = world(stack([m.position for m in ms_])[order])  # one sensor: one shape
-        first = np.flatnonzero(np.r_[True, (step_m[1:] != step_m[:-1]) | (t_m[1:] != t_m[:-1])])
-        lens = np.diff(np.r_[first, len(ms_)])
-        t_r = t_m[first]
-        arr_r = [arrs[i] for i in order[first].tolist()]
+        first_r = np.flatnonzero(np.r_[True, (step_m[1:] != step_m[:-1]) | (t_m[1:] != t_m[:-1])])
+        lens = np.diff(np.r_[first_r, len(ms_)])
+        t_r = t_m[first_r]
+        arr_r = [arrs[i] for i in order[first_r].tolist()]
         arr_m = np.array([t if a is None else a for t, a in zip(t_r.tolist(), arr_r, strict=True)], dtype=np.int64)
         rgba = np.where(used[:, None], _RGBA_USED, _RGBA_CLUTTER).astype(np.uint8)
         sink.col(f"world/meas/{sensor_id}", "points", radius=-1.75).extend(
-            t_r, step_m[first], arr_m, p=Ragged(P, lens), rgba=Ragged(rgba, lens))
+            t_r, step_m[first_r], arr_m, p=Ragged(P, lens), rgba=Ragged(rgba, lens))

@@ -17,6 +17,7 @@ from fusion.io import derive, gain_groups, trail
 from fusion.io.columns import stack
 from fusion.io.labels import short_id
 from fusion.io.palette import colour, series_colours
+from fusion.io.view_rows import Fields, Stacked
 from fusion.tracking.results import Estimate
 
 OSPA_EVERY_NS = 1_000_000_000  # OSPA / GOSPA at most once per second of sensor time
@@ -75,7 +76,7 @@ class Rows:
         return s
 
     # ---- one flush -------------------------------------------------------------------------------
-    def score(self, E: list[Estimate], t: Array, arr: Array, step: Array, sink: Any) -> _Stacked | None:
+    def score(self, E: list[Estimate], t: Array, arr: Array, step: Array, sink: Any) -> Stacked | None:
         """The record/estimates rows of a record flush's estimates (E, with their times t, arrival
         times and steps, int64 arrays), scored against the truth at
         their times (retractions as NaN rows), the trails (world/estimates, world/tentative) and
@@ -146,22 +147,21 @@ class Rows:
         sel = np.array([i for i, tid in enumerate(ids) if tid in viewed and conf[i]], dtype=np.int64)
         if not sel.size:
             return None
-        return _Stacked(t[sel], step[sel], arr[sel], X[sel], P[sel], std[sel], err[sel], matched[sel], nees[sel],
-                        TX_full(TX, m_idx, X.shape)[sel], W[sel], E=[E_[i] for i in sel.tolist()],
+        return Stacked(t[sel], step[sel], arr[sel], X[sel], P[sel], std[sel], err[sel], matched[sel], nees[sel],
+                        TX_full(TX, m_idx, X.shape)[sel], W[sel], f=Fields.of([E_[i] for i in sel.tolist()]),
                         ids=[ids[i] for i in sel.tolist()], conf=conf[sel])
 
-    def views(self, batches: list[_Stacked], sink: Any) -> None:
+    def views(self, batches: list[Stacked], sink: Any) -> None:
         """The viewed tracks' time series and cursor marks, from their rows of the record flushes
         since the last view flush (in their order)."""
         if not batches:
             return
-        c = batches[0] if len(batches) == 1 else _Stacked.concat(batches)
+        c = batches[0] if len(batches) == 1 else Stacked.concat(batches)
         rows_of: dict[int, list[int]] = defaultdict(list)
         for i, tid in enumerate(c.ids):
             rows_of[tid].append(i)
-        E_ = c.E
         for tid in sorted(rows_of, key=list(self.viewed).index):
-            self._track(sink, tid, np.array(rows_of[tid]), [E_[i] for i in rows_of[tid]], c)
+            self._track(sink, tid, np.array(rows_of[tid]), c.f.take(rows_of[tid]), c)
 
     def _set_distances(self, sink: Any, t: Array, step: Array, arr: Array, W: Array, conf: Array,
                        ids: list[int]) -> None:
@@ -182,15 +182,16 @@ class Rows:
                          colors=[colour("nees" if name == "ospa" else "nis")]).add(
                     int(t[i0]), int(step[i0]), int(arr[i0]), v=[v])
 
-    def _track(self, sink: Any, tid: int, rows: Array, es: list[Estimate], c: _Stacked) -> None:
+    def _track(self, sink: Any, tid: int, rows: Array, f: Fields, c: Stacked) -> None:
         """The time series and cursor entities of one viewed track."""
         lab = self.viewed[tid]
         base = f"tracks/{lab}"
         t, step, arr = c.t[rows], c.step[rows], c.arr[rows]
-        prior = stack([c.X[r] if e.prior_x is None else e.prior_x for r, e in zip(rows.tolist(), es, strict=True)])
+        prior = stack([c.X[r] if px is None else px for r, px in zip(rows.tolist(), f.prior_x, strict=True)])
         mt = c.matched[rows]
-        meas = [k for k, e in enumerate(es) if e.meas_pos is not None]
-        meas_pos = np.array([es[k].meas_pos[: len(self.pi)] for k in meas], dtype=np.float64)  # type: ignore[index]
+        mps = f.meas_pos
+        meas = [k for k, mp in enumerate(mps) if mp is not None]
+        meas_pos = stack([mps[k][: len(self.pi)] for k in meas])
         for a, i in enumerate(self.pi):
             ax = self.axes[a]
             # the prediction first: a plot draws its series in order, the estimate goes on top
@@ -219,24 +220,25 @@ class Rows:
         d = len(self.layout)
         sink.col(f"{base}/std", "scalars", width=d, names=[f"sigma {x}" for x in self.layout],
                  colors=series_colours(d)).extend(t, step, arr, v=c.std[rows])
-        self._update_parts(sink, base, es, t, step, arr)
-        self._cursor(sink, tid, lab, rows, es, c)
+        self._update_parts(sink, base, f, t, step, arr)
+        self._cursor(sink, tid, lab, rows, c)
 
-    def _update_parts(self, sink: Any, base: str, es: list[Estimate], t: Array, step: Array, arr: Array) -> None:
+    def _update_parts(self, sink: Any, base: str, f: Fields, t: Array, step: Array, arr: Array) -> None:
         """NIS with its bounds, innovation with +-2 sqrt(diag S) and Kalman gain, per sensor
         (stacked: one batched solve per sensor), and IMM mode probabilities."""
         d = len(self.layout)
         by_sensor: dict[str, list[int]] = defaultdict(list)
-        for k, e in enumerate(es):
-            if e.y is not None and e.S is not None and e.nis is not None:
-                by_sensor[e.sensor_id].append(k)
+        ys, Ss, niss, Hs, Pms = f.y, f.S, f.nis, f.H, f.prior_P
+        for k, (y, S_, v, sensor) in enumerate(zip(ys, Ss, niss, f.sensor_id, strict=True)):
+            if y is not None and S_ is not None and v is not None:
+                by_sensor[sensor].append(k)
         for sensor, ks in sorted(by_sensor.items()):
             sel = np.array(ks)
-            Y = stack([es[k].y for k in ks])  # type: ignore[misc]
-            S = stack([es[k].S for k in ks])  # type: ignore[misc]
+            Y = stack([ys[k] for k in ks])
+            S = stack([Ss[k] for k in ks])
             m = Y.shape[1]
             lo, hi = derive.chi2_bounds(m)
-            nis = np.array([es[k].nis for k in ks], dtype=np.float64)
+            nis = np.array([niss[k] for k in ks], dtype=np.float64)
             sink.col(f"{base}/nis", "scalars", width=3, names=[f"NIS (m={m})", "2.5 %", "97.5 %"],
                      colors=[colour("nis"), colour("bound"), colour("bound")]).extend(
                 t[sel], step[sel], arr[sel], v=np.column_stack([nis, np.full_like(nis, lo), np.full_like(nis, hi)]))
@@ -246,13 +248,13 @@ class Rows:
             sink.col(f"{base}/innovation/{sensor}", "scalars", width=3 * m, names=names,
                      colors=series_colours(m) + [colour("bound")] * 2 * m).extend(
                 t[sel], step[sel], arr[sel], v=np.concatenate([Y, s2, -s2], axis=1))
-            has_k = np.fromiter((es[k].H is not None and es[k].prior_P is not None for k in ks), dtype=bool,
+            has_k = np.fromiter((Hs[k] is not None and Pms[k] is not None for k in ks), dtype=bool,
                                 count=len(ks))
             if has_k.any():
                 kg = [k for k, h in zip(ks, has_k.tolist(), strict=True) if h]
                 gs = sel[has_k]
-                H = stack([es[k].H for k in kg])  # type: ignore[misc]
-                Pm = stack([es[k].prior_P for k in kg])  # type: ignore[misc]
+                H = stack([Hs[k] for k in kg])
+                Pm = stack([Pms[k] for k in kg])
                 Sg = S[has_k]  # the same S, already stacked
                 K = np.swapaxes(np.linalg.solve(Sg, H @ Pm), 1, 2)  # P- H' S^-1, S symmetric
                 # one scale per unit; a sink without the description (bench/recording_cost.py loads
@@ -264,14 +266,15 @@ class Rows:
                              names=[f"K[{x},{c}]" for x in self.layout for c in comp],
                              colors=series_colours(w)).extend(t[gs], step[gs], arr[gs],
                                                               v=K[:, :, cols].reshape(len(kg), -1))
-        mk = [k for k, e in enumerate(es) if e.mode_probabilities is not None]
+        mus = f.mode_probabilities
+        mk = [k for k, m in enumerate(mus) if m is not None]
         if mk:
-            mu = stack([es[k].mode_probabilities for k in mk])  # type: ignore[misc]
+            mu = stack([mus[k] for k in mk])
             sel = np.array(mk)
             sink.col(f"{base}/mode", "scalars", width=mu.shape[1], names=_mode_names(sink.mode_names, mu.shape[1]),
                      colors=series_colours(mu.shape[1])).extend(t[sel], step[sel], arr[sel], v=mu)
 
-    def _cursor(self, sink: Any, tid: int, lab: str, rows: Array, es: list[Estimate], c: _Stacked) -> None:
+    def _cursor(self, sink: Any, tid: int, lab: str, rows: Array, c: Stacked) -> None:
         """Labelled point and 2-sigma ellipse at the cursor, the faint trail of earlier ellipses
         (fusion.io.trail picks them); a start marker at the first row."""
         t, step, arr = c.t[rows], c.step[rows], c.arr[rows]
@@ -313,27 +316,6 @@ class Rows:
             lab = self.viewed[tid]
             sink.col(f"world/tracks/{lab}/end", "points", rgba=colour("end"), radius=-6.0).add(
                 t, step, arr, p=w[None, :])
-
-
-class _Stacked:
-    """The stacked arrays of the viewed tracks' rows of one record flush (or of several,
-    concatenated), with the estimates themselves (E), their track ids and whether each is confirmed."""
-
-    __slots__ = ("E", "P", "TX", "W", "X", "arr", "conf", "err", "ids", "matched", "nees", "std", "step", "t")
-
-    def __init__(self, t: Array, step: Array, arr: Array, X: Array, P: Array, std: Array, err: Array,
-                 matched: Array, nees: Array, TX: Array, W: Array, *, E: list[Estimate], ids: list[int],
-                 conf: Array) -> None:
-        self.t, self.step, self.arr, self.X, self.P, self.std = t, step, arr, X, P, std
-        self.err, self.matched, self.nees, self.TX, self.W = err, matched, nees, TX, W
-        self.E, self.ids, self.conf = E, ids, conf
-
-    @classmethod
-    def concat(cls, parts: list[_Stacked]) -> _Stacked:
-        arrays = [np.concatenate([getattr(p, f) for p in parts]) for f in
-                  ("t", "step", "arr", "X", "P", "std", "err", "matched", "nees", "TX", "W")]
-        return cls(*arrays, E=[e for p in parts for e in p.E], ids=[i for p in parts for i in p.ids],
-                   conf=np.concatenate([p.conf for p in parts]))
 
 
 def TX_full(TX: Array, idx: Array, shape: tuple[int, ...]) -> Array:
