@@ -86,8 +86,13 @@ class Measured:
 
     @classmethod
     def of(cls, z: tuple[Array, ...], R: tuple[Array, ...], models: tuple[MeasurementModel, ...]) -> Measured:
-        dims = np.array([v.shape[0] for v in z], dtype=np.intp)
-        at = np.zeros(dims.size, dtype=np.intp)
+        M = len(z)
+        dims = np.fromiter((v.shape[0] for v in z), dtype=np.intp, count=M)
+        if M and (dims == dims[0]).all():  # one dimension (a sensor's scan, usually): stacked as they come
+            d = int(dims[0])
+            return cls(z, models, R, {d: np.array(z, dtype=np.float64)}, {d: np.array(R, dtype=np.float64)}, dims,
+                       np.arange(M, dtype=np.intp))
+        at = np.zeros(M, dtype=np.intp)
         Zs: dict[int, Array] = {}
         Rs: dict[int, Array] = {}
         for m in np.unique(dims).tolist():

@@ -38,6 +38,8 @@ from fusion.tracking.results import (
 )
 from fusion.tracking.trackset import Rows, Status, TrackSet, track_id_for
 
+_LABELS = {int(s): s.label for s in Status}
+
 
 class Tally(StrEnum):
     """What a scan counts (deletions are counted by their DeletionReason)."""
@@ -114,23 +116,25 @@ def run_scan(ts: TrackSet, key: ScanKey, dets: tuple[Detection, ...], ctx: ScanC
     hits = ts.hits[ti] + 1
     confirm = ctx.lifecycle.confirms(ts.status[ti], hits, ts.chances[ti] + 1)
     status = np.where(confirm, np.int8(Status.CONFIRMED), ts.status[ti]).astype(np.int8)
-    seqs = np.array([dets[j].seq for j in mj.tolist()], dtype=np.int64)
+    det_seqs = np.fromiter((d.seq for d in dets), dtype=np.int64, count=len(dets))
+    seqs = det_seqs[mj]
     updated_rows = Rows(ts.ids[ti], status, hits, ts.birth_t_ns[ti], np.full(ti.size, t_ns, np.int64),
                         ts.chances[ti], ts.misses[ti], ts.seen_by[ti], ts.origin_sensor[ti], ts.origin_seq[ti],
                         np.full(ti.size, sm.index, np.int32), seqs, taken.X, taken.P, taken.MX, taken.MP, taken.MU)
     events = [TrackEvent(EventKind.CONFIRMED, int(ts.ids[i]), t_ns) for i in ti[confirm].tolist()]
     tally[Tally.CONFIRMATIONS] += len(events)
-    ids, nis = ts.ids.tolist(), gated.nis.tolist()
-    labels = {int(s): s.label for s in Status}
+    est_ids = updated_rows.ids.tolist()
+    nis = gated.nis[pairs].tolist()
+    mj_list = mj.tolist()
     MU = [None] * ti.size if taken.MU is None else list(taken.MU)
     estimates = [
-        Estimate(ids[i], t_ns, sensor_id, seq, x, P, labels[st], 0, nis[p], y, S, mu, mpos[j], px, pP, H)
-        for p, i, j, seq, st, x, P, y, S, mu, px, pP, H in zip(
-            pairs, ti.tolist(), mj.tolist(), seqs.tolist(), status.tolist(), list(taken.X), list(taken.P), taken.y,
-            taken.S, MU, taken.prior_x, taken.prior_P, taken.H, strict=True)
+        Estimate(tid, t_ns, sensor_id, seq, x, P, _LABELS[st], 0, v, y, S, mu, mp, px, pP, H)
+        for tid, seq, st, x, P, v, y, S, mu, mp, px, pP, H in zip(
+            est_ids, seqs.tolist(), status.tolist(), list(taken.X), list(taken.P), nis, taken.y, taken.S, MU,
+            list(mpos[mj]), taken.prior_x, taken.prior_P, taken.H, strict=True)
     ]
 
-    assoc, born, born_j = _births_and_associations(ts, key, dets, gated, dict(zip(mj.tolist(), pairs, strict=True)),
+    assoc, born, born_j = _births_and_associations(ts, key, dets, gated, dict(zip(mj_list, pairs, strict=True)),
                                                    ctx, sm, mpos, tally)
     for b in range(born.ids.size):
         tid = int(born.ids[b])
@@ -152,7 +156,11 @@ def run_scan(ts: TrackSet, key: ScanKey, dets: tuple[Detection, ...], ctx: ScanC
             tally[ev.reason] += 1
     events.extend(sweep.events)
     after = updated.derive(counters=sweep.counters, delete=sweep.delete, born=born)
-    estimates.sort(key=lambda e: e.track_id)
+    if born.ids.size:  # track ids are unique: sorted by id (stably, as sorted() would)
+        order = np.argsort(np.concatenate([updated_rows.ids, born.ids]), kind="stable").tolist()
+        estimates = [estimates[k] for k in order]
+    elif ti.size > 1 and not (np.diff(updated_rows.ids) > 0).all():
+        estimates = [estimates[k] for k in np.argsort(updated_rows.ids, kind="stable").tolist()]
     return ScanOutcome(after, estimates, events, assoc, tally, mpos, mvar, (ci, cj))
 
 
