@@ -4,6 +4,7 @@ The arithmetic of fusion.core.imm_stack's numpy formulation, operation for opera
 numbers are the same bit for bit), with one compiled call where that took one numpy call per
 operation and per mode. For N IMM states of M modes (mode states x_ki, P_ki, probabilities
 mu_k, switching matrices Pi_k, predicted probabilities c_k = mu_k Pi_k, computed by the caller):
+    distinct:        the distinct time steps of a stack (np.unique with its inverse);
     mix_many:        w_kij = Pi_kij mu_ki / c_kj (c_kj <= 0 taken as 1),
                      x0_kj = sum_i w_kij x_ki,  P0_kj = sum_i w_kij (P_ki + d d') for the rows
                      `sel` that move (compiled_stack.combine_into), mode-major (M, S, ...);
@@ -31,6 +32,23 @@ from numba import njit
 
 from fusion.core.compiled import predict_into, update_into
 from fusion.core.compiled_stack import combine_into, combine_many, innovate_many
+
+
+@njit(cache=True, fastmath=False)
+def distinct(dt: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """np.unique(dt, return_inverse=True) of a float64 vector without NaN: the sorted distinct
+    values du and inv with du[inv] == dt."""
+    N = dt.shape[0]
+    srt = np.sort(dt)
+    du = np.empty(N)
+    U = 0
+    for k in range(N):
+        if U == 0 or srt[k] != du[U - 1]:
+            du[U] = srt[k]
+            U += 1
+    du = du[:U].copy()
+    inv = np.searchsorted(du, dt)
+    return du, inv.astype(np.intp)
 
 
 @njit(cache=True, fastmath=False)
