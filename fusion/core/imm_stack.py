@@ -52,6 +52,11 @@ def _f64(a: Array) -> Array:
     return np.ascontiguousarray(a, dtype=np.float64)
 
 
+def _stack_of(a: Array, shape: tuple[int, ...]) -> Array:
+    """a broadcast to `shape`, float64 and C-contiguous (a itself where it has the shape)."""
+    return _f64(a if a.shape == shape else np.broadcast_to(a, shape))
+
+
 def predict_imm(imm: IMM, xs: Array, Ps: Array, mu: Array, dt: Array, steps: StepCache | None = None
                 ) -> StackPrediction:
     """Mix and predict N IMM states by dt (N,) seconds each: the mixing and the modes' predicts
@@ -145,8 +150,8 @@ def innovate_imm(pred: StackPrediction, rows: np.ndarray, Z: Array, R: Array, mo
     N, M, n = xs.shape
     m = Z.shape[1]
     ys = _f64(model.residual(Z[:, None, :], model.h(xs)))
-    Hs = _f64(np.broadcast_to(model.jacobian(xs), (N, M, m, n)))
-    R = _f64(np.broadcast_to(R, (N, m, m)))
+    Hs = _stack_of(model.jacobian(xs), (N, M, m, n))
+    R = _stack_of(R, (N, m, m))
     ok, Ss, ll = innovate_modes(_f64(pred.Ps), rows, ys, Hs, R)
     if not ok:
         raise NumericalError("an innovation covariance S is not positive definite")

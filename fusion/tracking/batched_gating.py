@@ -172,7 +172,9 @@ class BatchedIMMGate(_Batched):
         xs, Ps, x, P = posterior_imm(p, inn, keep)
         at = inn.rows[keep]
         px = p.x[at]
-        H = np.broadcast_to(model.jacobian(px), (keep.size, inn.y.shape[1], px.shape[1]))
+        H = model.jacobian(px)
+        if H.shape != (keep.size, inn.y.shape[1], px.shape[1]):
+            H = np.broadcast_to(H, (keep.size, inn.y.shape[1], px.shape[1]))
         return Part(x, P, px, p.P[at], inn.y[keep], inn.S[keep], H, inn.nis[keep], xs, Ps, inn.mu[keep])
 
 

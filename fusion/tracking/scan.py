@@ -118,12 +118,14 @@ def run_scan(ts: TrackSet, key: ScanKey, dets: tuple[Detection, ...], ctx: ScanC
     status = np.where(confirm, np.int8(Status.CONFIRMED), ts.status[ti]).astype(np.int8)
     det_seqs = np.fromiter((d.seq for d in dets), dtype=np.int64, count=len(dets))
     seqs = det_seqs[mj]
-    updated_rows = Rows(ts.ids[ti], status, hits, ts.birth_t_ns[ti], np.full(ti.size, t_ns, np.int64),
-                        ts.chances[ti], ts.misses[ti], ts.seen_by[ti], ts.origin_sensor[ti], ts.origin_seq[ti],
-                        np.full(ti.size, sm.index, np.int32), seqs, taken.X, taken.P, taken.MX, taken.MP, taken.MU)
+    # what an update changes in a row (its id, birth, origin and counters stay)
+    changes = {"status": status, "hits": hits, "t_ns": np.full(ti.size, t_ns, np.int64),
+               "last_sensor": np.full(ti.size, sm.index, np.int32), "last_seq": seqs, "X": taken.X, "P": taken.P,
+               "MX": taken.MX, "MP": taken.MP, "MU": taken.MU}
+    updated_ids = ts.ids[ti]
     events = [TrackEvent(EventKind.CONFIRMED, int(ts.ids[i]), t_ns) for i in ti[confirm].tolist()]
     tally[Tally.CONFIRMATIONS] += len(events)
-    est_ids = updated_rows.ids.tolist()
+    est_ids = updated_ids.tolist()
     nis = gated.nis[pairs].tolist()
     mj_list = mj.tolist()
     MU = [None] * ti.size if taken.MU is None else list(taken.MU)
@@ -147,7 +149,7 @@ def run_scan(ts: TrackSet, key: ScanKey, dets: tuple[Detection, ...], ctx: ScanC
                                   None if born.MU is None else born.MU[b], mpos[born_j[b]]))
     tally[Tally.BIRTHS] += born.ids.size
 
-    updated = ts.derive(update=(ti, updated_rows))
+    updated = ts.derive(update=(ti, changes))
     hit = np.zeros(len(ts), dtype=bool)
     hit[ti] = True
     sweep = ctx.lifecycle.sweep(ts, updated, hit, sm, t_ns, (tpos, tvar))
@@ -157,10 +159,10 @@ def run_scan(ts: TrackSet, key: ScanKey, dets: tuple[Detection, ...], ctx: ScanC
     events.extend(sweep.events)
     after = updated.derive(counters=sweep.counters, delete=sweep.delete, born=born)
     if born.ids.size:  # track ids are unique: sorted by id (stably, as sorted() would)
-        order = np.argsort(np.concatenate([updated_rows.ids, born.ids]), kind="stable").tolist()
+        order = np.argsort(np.concatenate([updated_ids, born.ids]), kind="stable").tolist()
         estimates = [estimates[k] for k in order]
-    elif ti.size > 1 and not (np.diff(updated_rows.ids) > 0).all():
-        estimates = [estimates[k] for k in np.argsort(updated_rows.ids, kind="stable").tolist()]
+    elif ti.size > 1 and not (np.diff(updated_ids) > 0).all():
+        estimates = [estimates[k] for k in np.argsort(updated_ids, kind="stable").tolist()]
     return ScanOutcome(after, estimates, events, assoc, tally, mpos, mvar, (ci, cj))
 
 

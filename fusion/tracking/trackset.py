@@ -256,18 +256,19 @@ class TrackSet:
         out[rows] = ~same
         return out
 
-    def derive(self, *, update: tuple[np.ndarray, Rows] | None = None,
+    def derive(self, *, update: tuple[np.ndarray, dict[str, np.ndarray | None]] | None = None,
                counters: dict[str, np.ndarray] | None = None, delete: np.ndarray | None = None,
                born: Rows | None = None) -> TrackSet:
-        """A new set: rows `update[0]` replaced by `update[1]` (all but the counters), the
-        lifecycle `counters` replaced, rows where `delete` is true removed, `born` appended."""
+        """A new set: in rows `update[0]` the columns named in `update[1]` replaced by its
+        values (the others, and the counters, kept), the lifecycle `counters` replaced, rows
+        where `delete` is true removed, `born` appended."""
         cols = {f: getattr(self, f) for f in ROW_FIELDS}
         if update is not None and update[0].size:
             idx, new = update
-            for f in ROW_FIELDS:
+            for f, v in new.items():
                 if f not in COUNTERS and cols[f] is not None:
                     c = cols[f].copy()
-                    c[idx] = getattr(new, f)
+                    c[idx] = v
                     cols[f] = c
         if counters:
             cols.update(counters)
