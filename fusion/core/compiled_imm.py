@@ -15,7 +15,7 @@ mu_k, switching matrices Pi_k, predicted probabilities c_k = mu_k Pi_k, computed
                      rows that do not move keep their modes; then the
                      combination x_k = sum_j c_kj x-_kj, P_k likewise;
     innovate_modes:  each mode's S_kj, NIS and log-likelihood of its innovation y_kj, pair k
-                     of predicted state rows[k] (compiled_stack.innovate_many per mode);
+                     of predicted state rows[k] (compiled_stack.innovate_into per pair and mode);
     mixture_many:    the mixture innovation y_k = sum_j c_kj y_kj and
                      S_k = sum_j c_kj S_kj + sum_j (c_kj d_kj) d_kj', d_kj = y_kj - y_k;
     posterior_many:  each mode's EKF update of the pairs `rows` (predicted state at[k] of pair
@@ -31,7 +31,7 @@ import numpy as np
 from numba import njit
 
 from fusion.core.compiled import predict_into, update_into
-from fusion.core.compiled_stack import combine_into, combine_many, innovate_many
+from fusion.core.compiled_stack import combine_into, combine_many, innovate_into
 
 
 @njit(cache=True, fastmath=False)
@@ -96,15 +96,15 @@ def innovate_modes(Ps: np.ndarray, rows: np.ndarray, Y: np.ndarray, H: np.ndarra
     m = Y.shape[2]
     Ss = np.empty((N, M, m, m))
     ll = np.empty((N, M))
-    P = np.empty((N, n, n))
-    for j in range(M):
-        for k in range(N):
-            P[k] = Ps[rows[k], j]
-        ok, S, _, lj = innovate_many(P, np.ascontiguousarray(Y[:, j]), np.ascontiguousarray(H[:, j]), R)
-        if not ok.all():
-            return False, Ss, ll
-        Ss[:, j] = S
-        ll[:, j] = lj
+    HP = np.empty((m, n))
+    L = np.empty((m, m))
+    w = np.empty(m)
+    for k in range(N):
+        for j in range(M):
+            good, _, lj = innovate_into(Ps[rows[k], j], Y[k, j], H[k, j], R[k], Ss[k, j], HP, L, w)
+            if not good:
+                return False, Ss, ll
+            ll[k, j] = lj
     return True, Ss, ll
 
 

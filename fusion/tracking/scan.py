@@ -183,13 +183,13 @@ def _births_and_associations(ts: TrackSet, key: ScanKey, dets: tuple[Detection, 
     births: list[int] = []
     room = ctx.max_tracks - len(ts)
     unassigned = refused = 0
-    for j, d in enumerate(dets):
-        lo, hi = bounds[j], bounds[j + 1]
-        near = tuple(gids[lo:hi])
+    updated = Outcome.UPDATED
+    for j, (d, lo, hi) in enumerate(zip(dets, bounds, bounds[1:])):
         p = taken.get(j)
         if p is not None:
-            assoc.append(Association(sensor_id, t_ns, d.seq, Outcome.UPDATED, gids[p], nis[p], near))
+            assoc.append(Association(sensor_id, t_ns, d.seq, updated, gids[p], nis[p], tuple(gids[lo:hi])))
             continue
+        near = tuple(gids[lo:hi])
         if near:  # in a gate, but no track took it
             unassigned += 1
         if len(births) >= room:
