@@ -24,6 +24,7 @@ import numpy as np
 from fusion.core.checks import Array
 from fusion.core.gaussian import GaussianState
 from fusion.core.imm import IMMState
+from fusion.tracking.id_sets import member
 
 
 class Status(IntEnum):
@@ -36,14 +37,6 @@ class Status(IntEnum):
 
 
 _LABELS = {Status.TENTATIVE: "tentative", Status.CONFIRMED: "confirmed"}
-
-
-def member(values: np.ndarray, of: np.ndarray) -> np.ndarray:
-    """values[i] in `of`, for each i (np.isin by sorting `of`: faster on the small arrays here)."""
-    if of.size == 0 or values.size == 0:
-        return np.zeros(values.shape, dtype=bool)
-    srt = np.sort(of)
-    return srt[np.minimum(np.searchsorted(srt, values), srt.size - 1)] == values
 
 
 @functools.cache
