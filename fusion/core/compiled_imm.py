@@ -10,7 +10,7 @@ mu_k, switching matrices Pi_k, predicted probabilities c_k = mu_k Pi_k, computed
                      `sel` that move (compiled_stack.combine_into), mode-major (M, S, ...);
     predict_many:    each moving mode x-_kj = F_kj x0_kj (or f(x0_kj) where the model is
                      nonlinear: the caller's Xf), P-_kj = F_kj P0_kj F_kj' + Q_kj
-                     (compiled.predict_into), F_kj = F[j, Fi[j, s]] for moving row s (so that
+                     (compiled.predict_work), F_kj = F[j, Fi[j, s]] for moving row s (so that
                      F and Q set by dt alone are given once per distinct dt), Q likewise;
                      rows that do not move keep their modes; then the
                      combination x_k = sum_j c_kj x-_kj, P_k likewise;
@@ -19,7 +19,7 @@ mu_k, switching matrices Pi_k, predicted probabilities c_k = mu_k Pi_k, computed
     mixture_many:    the mixture innovation y_k = sum_j c_kj y_kj and
                      S_k = sum_j c_kj S_kj + sum_j (c_kj d_kj) d_kj', d_kj = y_kj - y_k;
     posterior_many:  each mode's EKF update of the pairs `rows` (predicted state at[k] of pair
-                     k; compiled.update_into) and their combination with the posterior
+                     k; compiled.update_work) and their combination with the posterior
                      probabilities.
 Arrays are allocated here (their sizes depend on the stack) and returned; the inputs must be
 float64 and C-contiguous (the callers in imm_stack pass them so).
@@ -30,7 +30,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from fusion.core.compiled import predict_into, update_into
+from fusion.core.compiled import predict_work, update_work, update_work_size
 from fusion.core.compiled_stack import combine_into, combine_many, innovate_into
 
 
@@ -76,13 +76,14 @@ def predict_many(xs: np.ndarray, Ps: np.ndarray, sel: np.ndarray, X0: np.ndarray
                  F: np.ndarray, Fi: np.ndarray, Q: np.ndarray, Qi: np.ndarray, Xf: np.ndarray,
                  use_f: np.ndarray, c: np.ndarray
                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    M = xs.shape[1]
+    M, n = xs.shape[1], xs.shape[2]
     pxs = xs.copy()
     pPs = Ps.copy()
+    FP = np.empty(n * n)
     for s in range(sel.shape[0]):
         k = sel[s]
         for j in range(M):
-            predict_into(X0[j, s], P0[j, s], F[j, Fi[j, s]], Q[j, Qi[j, s]], pxs[k, j], pPs[k, j])
+            predict_work(X0[j, s], P0[j, s], F[j, Fi[j, s]], Q[j, Qi[j, s]], pxs[k, j], pPs[k, j], FP)
             if use_f[j]:
                 pxs[k, j] = Xf[j, s]
     X, P = combine_many(pxs, pPs, c)
@@ -143,11 +144,12 @@ def posterior_many(xs: np.ndarray, Ps: np.ndarray, at: np.ndarray, ys: np.ndarra
     uxs = np.empty((K, M, n))
     uPs = np.empty((K, M, n, n))
     S = np.empty((m, m))
+    work = np.empty(update_work_size(n, m))
     for q in range(K):
         k = rows[q]
         p = at[k]
         for j in range(M):
-            good, _, _ = update_into(xs[p, j], Ps[p, j], ys[k, j], Hs[k, j], R[k], uxs[q, j], uPs[q, j], S)
+            good, _, _ = update_work(xs[p, j], Ps[p, j], ys[k, j], Hs[k, j], R[k], uxs[q, j], uPs[q, j], S, work)
             if not good:
                 return False, uxs, uPs, uxs[:, 0], uPs[:, 0]
     X = np.empty((K, n))

@@ -239,6 +239,9 @@ def measured_points(sm: SensorModel, dets: tuple[Detection, ...]) -> tuple[Array
 
 def _measured_points(sm: SensorModel, meas: Measured) -> tuple[Array, Array]:
     """World points of the scan's measurements and per-axis variances, one call per dimension."""
+    if len(meas.Z) == 1:  # one dimension: the stacks are the measurements in order
+        (m, Z), = meas.Z.items()
+        return sm.positions(Z, meas.Rs[m])
     M = meas.dims.size
     mpos = np.empty((M, sm.ndim))
     mvar = np.empty((M, sm.ndim))
