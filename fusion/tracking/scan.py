@@ -97,8 +97,7 @@ def run_scan(ts: TrackSet, key: ScanKey, dets: tuple[Detection, ...], ctx: ScanC
     the scan's coarse gate if the caller knows it (a partial re-run: fusion.tracking.replay)."""
     t_ns, sensor_id = key
     sm = ctx.sensors[sensor_id]
-    meas = Measured.of(tuple(d.z for d in dets), tuple(d.R for d in dets),  # type: ignore[arg-type]
-                       tuple(sm.by_dim[d.z.shape[0]] for d in dets))
+    meas = _measured(sm, dets)
     tpos, tvar = ts.predicted_position(t_ns, ctx.q2)
     if coarse is None:
         mpos, mvar = _measured_points(sm, meas)
@@ -233,8 +232,14 @@ def _assign_confirmed_first(g: Gated, ts: TrackSet, n_meas: int) -> list[int]:
 
 def measured_points(sm: SensorModel, dets: tuple[Detection, ...]) -> tuple[Array, Array]:
     """World points and per-axis variances of a scan's detections, as run_scan computes them."""
-    return _measured_points(sm, Measured.of(tuple(d.z for d in dets), tuple(d.R for d in dets),  # type: ignore[arg-type]
-                                            tuple(sm.by_dim[d.z.shape[0]] for d in dets)))
+    return _measured_points(sm, _measured(sm, dets))
+
+
+def _measured(sm: SensorModel, dets: tuple[Detection, ...]) -> Measured:
+    """The scan's measurements with their models and noise (fusion.tracking.gating.Measured)."""
+    zs = tuple([d.z for d in dets])
+    by_dim = sm.by_dim
+    return Measured.of(zs, tuple([d.R for d in dets]), tuple([by_dim[z.shape[0]] for z in zs]))  # type: ignore[misc]
 
 
 def _measured_points(sm: SensorModel, meas: Measured) -> tuple[Array, Array]:
