@@ -34,7 +34,7 @@ from fusion.core.checks import Array
 @njit(cache=True, fastmath=False)
 def _sweep(track_pos: np.ndarray, track_var: np.ndarray, meas_pos: np.ndarray, meas_var: np.ndarray,
            k: float) -> tuple[np.ndarray, np.ndarray]:
-    """Pairs (i, j) with (p_ia - m_ja)^2 <= k^2 (v_ia + w_ja) on every axis a, by track."""
+    """Pairs (i, j) with (p_ia - m_ja)^2 <= k^2 (v_ia + w_ja) on every axis a, sorted by (j, i)."""
     N, d = track_pos.shape
     M = meas_pos.shape[0]
     order = np.argsort(meas_pos[:, 0], kind="mergesort")
@@ -70,7 +70,20 @@ def _sweep(track_pos: np.ndarray, track_var: np.ndarray, meas_pos: np.ndarray, m
                 ti[n] = i
                 mj[n] = j
                 n += 1
-    return ti[:n], mj[:n]
+    # sorted by (j, i): a stable counting sort by j of pairs found in increasing i
+    start = np.zeros(M + 1, dtype=np.intp)
+    for p in range(n):
+        start[mj[p] + 1] += 1
+    for j in range(M):
+        start[j + 1] += start[j]
+    si = np.empty(n, dtype=np.intp)
+    sj = np.empty(n, dtype=np.intp)
+    for p in range(n):
+        q = start[mj[p]]
+        si[q] = ti[p]
+        sj[q] = mj[p]
+        start[mj[p]] = q + 1
+    return si, sj
 
 
 def coarse_pairs(
@@ -85,10 +98,8 @@ def coarse_pairs(
         e = np.empty(0, dtype=np.intp)
         return e, e
     c = np.ascontiguousarray
-    i, j = _sweep(c(track_pos, np.float64), c(track_var, np.float64), c(meas_pos, np.float64),
+    return _sweep(c(track_pos, np.float64), c(track_var, np.float64), c(meas_pos, np.float64),
                   c(meas_var, np.float64), float(k))
-    s = np.lexsort((i, j))
-    return i[s], j[s]
 
 
 def gnn_assign(

@@ -4,21 +4,22 @@ The arithmetic of fusion.core.imm_stack's numpy formulation, operation for opera
 numbers are the same bit for bit), with one compiled call where that took one numpy call per
 operation and per mode. For N IMM states of M modes (mode states x_ki, P_ki, probabilities
 mu_k, switching matrices Pi_k, predicted probabilities c_k = mu_k Pi_k, computed by the caller):
+    distinct:        the distinct time steps of a stack (np.unique with its inverse);
     mix_many:        w_kij = Pi_kij mu_ki / c_kj (c_kj <= 0 taken as 1),
                      x0_kj = sum_i w_kij x_ki,  P0_kj = sum_i w_kij (P_ki + d d') for the rows
                      `sel` that move (compiled_stack.combine_into), mode-major (M, S, ...);
     predict_many:    each moving mode x-_kj = F_kj x0_kj (or f(x0_kj) where the model is
                      nonlinear: the caller's Xf), P-_kj = F_kj P0_kj F_kj' + Q_kj
-                     (compiled.predict_into), F_kj = F[j, Fi[j, s]] for moving row s (so that
+                     (compiled.predict_work), F_kj = F[j, Fi[j, s]] for moving row s (so that
                      F and Q set by dt alone are given once per distinct dt), Q likewise;
                      rows that do not move keep their modes; then the
                      combination x_k = sum_j c_kj x-_kj, P_k likewise;
     innovate_modes:  each mode's S_kj, NIS and log-likelihood of its innovation y_kj, pair k
-                     of predicted state rows[k] (compiled_stack.innovate_many per mode);
+                     of predicted state rows[k] (compiled_stack.innovate_into per pair and mode);
     mixture_many:    the mixture innovation y_k = sum_j c_kj y_kj and
                      S_k = sum_j c_kj S_kj + sum_j (c_kj d_kj) d_kj', d_kj = y_kj - y_k;
     posterior_many:  each mode's EKF update of the pairs `rows` (predicted state at[k] of pair
-                     k; compiled.update_into) and their combination with the posterior
+                     k; compiled.update_work) and their combination with the posterior
                      probabilities.
 Arrays are allocated here (their sizes depend on the stack) and returned; the inputs must be
 float64 and C-contiguous (the callers in imm_stack pass them so).
@@ -29,8 +30,25 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from fusion.core.compiled import predict_into, update_into
-from fusion.core.compiled_stack import combine_into, combine_many, innovate_many
+from fusion.core.compiled import predict_work, update_work, update_work_size
+from fusion.core.compiled_stack import combine_into, combine_many, innovate_into
+
+
+@njit(cache=True, fastmath=False)
+def distinct(dt: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """np.unique(dt, return_inverse=True) of a float64 vector without NaN: the sorted distinct
+    values du and inv with du[inv] == dt."""
+    N = dt.shape[0]
+    srt = np.sort(dt)
+    du = np.empty(N)
+    U = 0
+    for k in range(N):
+        if U == 0 or srt[k] != du[U - 1]:
+            du[U] = srt[k]
+            U += 1
+    du = du[:U].copy()
+    inv = np.searchsorted(du, dt)
+    return du, inv.astype(np.intp)
 
 
 @njit(cache=True, fastmath=False)
@@ -58,13 +76,14 @@ def predict_many(xs: np.ndarray, Ps: np.ndarray, sel: np.ndarray, X0: np.ndarray
                  F: np.ndarray, Fi: np.ndarray, Q: np.ndarray, Qi: np.ndarray, Xf: np.ndarray,
                  use_f: np.ndarray, c: np.ndarray
                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    M = xs.shape[1]
+    M, n = xs.shape[1], xs.shape[2]
     pxs = xs.copy()
     pPs = Ps.copy()
+    FP = np.empty(n * n)
     for s in range(sel.shape[0]):
         k = sel[s]
         for j in range(M):
-            predict_into(X0[j, s], P0[j, s], F[j, Fi[j, s]], Q[j, Qi[j, s]], pxs[k, j], pPs[k, j])
+            predict_work(X0[j, s], P0[j, s], F[j, Fi[j, s]], Q[j, Qi[j, s]], pxs[k, j], pPs[k, j], FP)
             if use_f[j]:
                 pxs[k, j] = Xf[j, s]
     X, P = combine_many(pxs, pPs, c)
@@ -78,15 +97,15 @@ def innovate_modes(Ps: np.ndarray, rows: np.ndarray, Y: np.ndarray, H: np.ndarra
     m = Y.shape[2]
     Ss = np.empty((N, M, m, m))
     ll = np.empty((N, M))
-    P = np.empty((N, n, n))
-    for j in range(M):
-        for k in range(N):
-            P[k] = Ps[rows[k], j]
-        ok, S, _, lj = innovate_many(P, np.ascontiguousarray(Y[:, j]), np.ascontiguousarray(H[:, j]), R)
-        if not ok.all():
-            return False, Ss, ll
-        Ss[:, j] = S
-        ll[:, j] = lj
+    HP = np.empty((m, n))
+    L = np.empty((m, m))
+    w = np.empty(m)
+    for k in range(N):
+        for j in range(M):
+            good, _, lj = innovate_into(Ps[rows[k], j], Y[k, j], H[k, j], R[k], Ss[k, j], HP, L, w)
+            if not good:
+                return False, Ss, ll
+            ll[k, j] = lj
     return True, Ss, ll
 
 
@@ -125,11 +144,12 @@ def posterior_many(xs: np.ndarray, Ps: np.ndarray, at: np.ndarray, ys: np.ndarra
     uxs = np.empty((K, M, n))
     uPs = np.empty((K, M, n, n))
     S = np.empty((m, m))
+    work = np.empty(update_work_size(n, m))
     for q in range(K):
         k = rows[q]
         p = at[k]
         for j in range(M):
-            good, _, _ = update_into(xs[p, j], Ps[p, j], ys[k, j], Hs[k, j], R[k], uxs[q, j], uPs[q, j], S)
+            good, _, _ = update_work(xs[p, j], Ps[p, j], ys[k, j], Hs[k, j], R[k], uxs[q, j], uPs[q, j], S, work)
             if not good:
                 return False, uxs, uPs, uxs[:, 0], uPs[:, 0]
     X = np.empty((K, n))

@@ -71,43 +71,53 @@ def innovate_many(P: np.ndarray, Y: np.ndarray, H: np.ndarray, R: np.ndarray
     HP = np.empty((m, n))
     L = np.empty((m, m))
     w = np.empty(m)
-    two_pi_term = m * math.log(2.0 * math.pi)
     for q in range(N):
-        S = S_out[q]
-        for i in range(m):
-            for j in range(n):
-                s = 0.0
-                for k in range(n):
-                    s += H[q, i, k] * P[q, k, j]
-                HP[i, j] = s
-        for i in range(m):
-            for j in range(m):
-                s = 0.0
-                for k in range(n):
-                    s += HP[i, k] * H[q, j, k]
-                S[i, j] = s + R[q, i, j]
-        for i in range(m):
-            for j in range(i):
-                a = 0.5 * (S[i, j] + S[j, i])
-                S[i, j] = a
-                S[j, i] = a
-        L[:, :] = 0.0
-        if not cholesky_into(S, L):
+        good, nis, ll = innovate_into(P[q], Y[q], H[q], R[q], S_out[q], HP, L, w)
+        if not good:
             ok[q] = False
             continue
-        for i in range(m):
-            s = Y[q, i]
-            for k in range(i):
-                s -= L[i, k] * w[k]
-            w[i] = s / L[i, i]
-        nis = 0.0
-        logdet = 0.0
-        for i in range(m):
-            nis += w[i] * w[i]
-            logdet += 2.0 * math.log(L[i, i])
         nis_out[q] = nis
-        ll_out[q] = -0.5 * (nis + logdet + two_pi_term)
+        ll_out[q] = ll
     return ok, S_out, nis_out, ll_out
+
+
+@njit(cache=True, fastmath=False)
+def innovate_into(P: np.ndarray, y: np.ndarray, H: np.ndarray, R: np.ndarray, S: np.ndarray, HP: np.ndarray,
+                  L: np.ndarray, w: np.ndarray) -> tuple[bool, float, float]:
+    """One pair of innovate_many: S = H P H' + R (symmetrised) into S; (ok, NIS, log-likelihood);
+    HP (m, n), L (m, m), w (m,) are the caller's work arrays."""
+    m, n = H.shape[0], H.shape[1]
+    for i in range(m):
+        for j in range(n):
+            s = 0.0
+            for k in range(n):
+                s += H[i, k] * P[k, j]
+            HP[i, j] = s
+    for i in range(m):
+        for j in range(m):
+            s = 0.0
+            for k in range(n):
+                s += HP[i, k] * H[j, k]
+            S[i, j] = s + R[i, j]
+    for i in range(m):
+        for j in range(i):
+            a = 0.5 * (S[i, j] + S[j, i])
+            S[i, j] = a
+            S[j, i] = a
+    L[:, :] = 0.0
+    if not cholesky_into(S, L):
+        return False, 0.0, 0.0
+    for i in range(m):
+        s = y[i]
+        for k in range(i):
+            s -= L[i, k] * w[k]
+        w[i] = s / L[i, i]
+    nis = 0.0
+    logdet = 0.0
+    for i in range(m):
+        nis += w[i] * w[i]
+        logdet += 2.0 * math.log(L[i, i])
+    return True, nis, -0.5 * (nis + logdet + m * math.log(2.0 * math.pi))
 
 
 @njit(cache=True, fastmath=False)

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from fusion.core.checks import Array
-from fusion.core.compiled_imm import innovate_modes, mix_many, mixture_many, posterior_many, predict_many
+from fusion.core.compiled_imm import distinct, innovate_modes, mix_many, mixture_many, posterior_many, predict_many
 from fusion.core.imm import IMM
 from fusion.core.kalman import ExtendedKalmanFilter
 from fusion.core.measurement import MeasurementModel
@@ -52,14 +52,20 @@ def _f64(a: Array) -> Array:
     return np.ascontiguousarray(a, dtype=np.float64)
 
 
-def predict_imm(imm: IMM, xs: Array, Ps: Array, mu: Array, dt: Array) -> StackPrediction:
+def _stack_of(a: Array, shape: tuple[int, ...]) -> Array:
+    """a broadcast to `shape`, float64 and C-contiguous (a itself where it has the shape)."""
+    return _f64(a if a.shape == shape else np.broadcast_to(a, shape))
+
+
+def predict_imm(imm: IMM, xs: Array, Ps: Array, mu: Array, dt: Array, steps: StepCache | None = None
+                ) -> StackPrediction:
     """Mix and predict N IMM states by dt (N,) seconds each: the mixing and the modes' predicts
     and combination are compiled loops over the stack (fusion.core.compiled_imm); each mode's
     motion model gives its F, Q (and f if nonlinear) for the whole stack in one call, or once
-    per distinct dt where dt alone sets them."""
+    per distinct dt where dt alone sets them (kept in `steps` across calls if given)."""
     M, n = xs.shape[1], xs.shape[2]
     xs, Ps, mu = _f64(xs), _f64(Ps), _f64(mu)
-    du, inv = np.unique(dt, return_inverse=True)  # few distinct steps: Pi, and F, Q where dt alone sets them
+    du, inv = distinct(_f64(dt))  # few distinct steps: Pi, and F, Q where dt alone sets them
     Pi = np.stack([imm.transition(d) for d in du.tolist()])[inv]
     c = np.einsum("km,kmj->kj", mu, Pi)
     moving = dt > 0
@@ -71,21 +77,47 @@ def predict_imm(imm: IMM, xs: Array, Ps: Array, mu: Array, dt: Array) -> StackPr
     use_f = np.zeros(M, dtype=np.bool_)
     if S:
         dts, per_row, per_dt = dt[sel], np.arange(S), inv[sel]
+        by_dt = None if steps is None else steps.of(imm, du)
         for j, f in enumerate(imm.filters):
             m = f.motion
             if isinstance(m, LinearMotionModel):
-                F[j, :U], Fi[j] = m.F(du), per_dt
+                F[j, :U], Fi[j] = by_dt[j][0] if by_dt is not None else m.F(du), per_dt
             else:
                 F[j, :S], Fi[j] = m.jacobian(X0[j], dts), per_row
             if m.noise_depends_on_state:
                 Q[j, :S], Qi[j] = m.Q(X0[j], dts), per_row
             else:
-                Q[j, :U], Qi[j] = m.Q(np.zeros((U, n)), du), per_dt
+                Q[j, :U], Qi[j] = by_dt[j][1] if by_dt is not None else m.Q(np.zeros((U, n)), du), per_dt
             if not m.is_linear:
                 Xf[j], use_f[j] = m.f(X0[j], dts), True
     c = np.where(moving[:, None], c, mu)
     pxs, pPs, x, P = predict_many(xs, Ps, sel, X0, P0, F, Fi, Q, Qi, Xf, use_f, c)
     return StackPrediction(pxs, pPs, c, x, P)
+
+
+class StepCache:
+    """Each mode's F and Q for a stack of distinct steps du, where dt alone sets them (a linear
+    motion model's F; Q of a model whose noise does not depend on the state), kept by the bytes
+    of du: a sensor's scans repeat the same few steps, and the models' matrices of a step are a
+    function of the step alone, so a kept one is the one the model would give (bit for bit).
+    Holds at most `size` stacks (forgets them all when full)."""
+
+    def __init__(self, size: int = 256) -> None:
+        self.size = size
+        self._kept: dict[bytes, list[tuple[Array | None, Array | None]]] = {}
+
+    def of(self, imm: IMM, du: Array) -> list[tuple[Array | None, Array | None]]:
+        key = du.tobytes()
+        got = self._kept.get(key)
+        if got is None:
+            if len(self._kept) >= self.size:
+                self._kept.clear()
+            n = imm.filters[0].motion.ndim_state
+            got = self._kept[key] = [
+                (np.array(f.motion.F(du)) if isinstance(f.motion, LinearMotionModel) else None,
+                 None if f.motion.noise_depends_on_state else np.array(f.motion.Q(np.zeros((du.size, n)), du)))
+                for f in imm.filters]
+        return got
 
 
 @dataclass(frozen=True)
@@ -118,8 +150,8 @@ def innovate_imm(pred: StackPrediction, rows: np.ndarray, Z: Array, R: Array, mo
     N, M, n = xs.shape
     m = Z.shape[1]
     ys = _f64(model.residual(Z[:, None, :], model.h(xs)))
-    Hs = _f64(np.broadcast_to(model.jacobian(xs), (N, M, m, n)))
-    R = _f64(np.broadcast_to(R, (N, m, m)))
+    Hs = _stack_of(model.jacobian(xs), (N, M, m, n))
+    R = _stack_of(R, (N, m, m))
     ok, Ss, ll = innovate_modes(_f64(pred.Ps), rows, ys, Hs, R)
     if not ok:
         raise NumericalError("an innovation covariance S is not positive definite")

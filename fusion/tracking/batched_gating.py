@@ -20,7 +20,7 @@ import numpy as np
 from fusion.core.checks import Array
 from fusion.core.compiled_stack import innovate_stack, predict_stack, update_stack
 from fusion.core.imm import IMM, Filter
-from fusion.core.imm_stack import StackPrediction, innovate_imm, posterior_imm, predict_imm, stackable
+from fusion.core.imm_stack import StackPrediction, StepCache, innovate_imm, posterior_imm, predict_imm, stackable
 from fusion.core.kalman import ExtendedKalmanFilter
 from fusion.core.measurement import MeasurementModel
 from fusion.core.ukf import UnscentedKalmanFilter
@@ -88,9 +88,12 @@ class _Batched(ABC):
         tracks = np.flatnonzero(seen)
         row = (np.cumsum(seen) - 1)[ci]
         pred = self._predict(ts, t_ns, tracks)
-        dims = meas.dims[cj]
-        for dim in np.unique(dims).tolist():
-            sel = np.flatnonzero(dims == dim)
+        one = len(meas.Z) == 1  # one measurement dimension in the scan: every pair in one group
+        dims = None if one else meas.dims[cj]
+        for dim in sorted(meas.Z):
+            sel = np.arange(cj.size) if dims is None else np.flatnonzero(dims == dim)
+            if sel.size == 0:
+                continue
             js = cj[sel]
             model = meas.models[int(js[0])]  # one model per dimension and sensor: pairs differ by z and R
             try:
@@ -150,9 +153,13 @@ class BatchedIMMGate(_Batched):
 
     filter: IMM
 
+    def __init__(self, filt: Filter, thresholds: dict[int, float], inputs: InputTimeline | None = None) -> None:
+        super().__init__(filt, thresholds, inputs)
+        self._steps = StepCache()  # the modes' F and Q of the steps seen (a scan repeats a few)
+
     def _predict(self, ts: TrackSet, t_ns: int, tracks: np.ndarray) -> StackPrediction:
         return predict_imm(self.filter, ts.MX[tracks], ts.MP[tracks], ts.MU[tracks],  # type: ignore[index]
-                           (t_ns - ts.t_ns[tracks]) * 1e-9)
+                           (t_ns - ts.t_ns[tracks]) * 1e-9, self._steps)
 
     def _innovate(self, pred: object, rows: np.ndarray, Z: Array, R: Array, model: MeasurementModel
                   ) -> tuple[Array, Array, object]:
@@ -165,7 +172,9 @@ class BatchedIMMGate(_Batched):
         xs, Ps, x, P = posterior_imm(p, inn, keep)
         at = inn.rows[keep]
         px = p.x[at]
-        H = np.broadcast_to(model.jacobian(px), (keep.size, inn.y.shape[1], px.shape[1]))
+        H = model.jacobian(px)
+        if H.shape != (keep.size, inn.y.shape[1], px.shape[1]):
+            H = np.broadcast_to(H, (keep.size, inn.y.shape[1], px.shape[1]))
         return Part(x, P, px, p.P[at], inn.y[keep], inn.S[keep], H, inn.nis[keep], xs, Ps, inn.mu[keep])
 
 

@@ -86,8 +86,13 @@ class Measured:
 
     @classmethod
     def of(cls, z: tuple[Array, ...], R: tuple[Array, ...], models: tuple[MeasurementModel, ...]) -> Measured:
-        dims = np.array([v.shape[0] for v in z], dtype=np.intp)
-        at = np.zeros(dims.size, dtype=np.intp)
+        M = len(z)
+        dims = np.fromiter((v.shape[0] for v in z), dtype=np.intp, count=M)
+        if M and (dims == dims[0]).all():  # one dimension (a sensor's scan, usually): stacked as they come
+            d = int(dims[0])
+            return cls(z, models, R, {d: np.array(z, dtype=np.float64)}, {d: np.array(R, dtype=np.float64)}, dims,
+                       np.arange(M, dtype=np.intp))
+        at = np.zeros(M, dtype=np.intp)
         Zs: dict[int, Array] = {}
         Rs: dict[int, Array] = {}
         for m in np.unique(dims).tolist():
@@ -115,8 +120,13 @@ class Gated:
 
     def take(self, pairs: list[int]) -> Taken:
         """The chosen pairs' answers, gathered from the stacks."""
-        n = self.parts[0].X.shape[1] if self.parts else 0
         k = len(pairs)
+        if len(self.parts) == 1:  # every pair from one part (one measurement dimension): its rows
+            part, rows = self.parts[0], self.where[pairs, 1] if k else np.zeros(0, dtype=np.intp)
+            MX, MP, MU = (None if a is None else a[rows] for a in (part.MX, part.MP, part.MU))
+            return Taken(part.X[rows], part.P[rows], MX, MP, MU, list(part.prior_x[rows]), list(part.prior_P[rows]),
+                         list(part.y[rows]), list(part.S[rows]), list(part.H[rows]))
+        n = self.parts[0].X.shape[1] if self.parts else 0
         imm = bool(self.parts) and self.parts[0].MX is not None
         X, P = np.empty((k, n)), np.empty((k, n, n))
         MX = MP = MU = None

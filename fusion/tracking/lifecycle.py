@@ -21,6 +21,7 @@ import numpy as np
 
 from fusion.config import LifecycleConfig
 from fusion.core.timebase import NS_PER_S
+from fusion.tracking.lifecycle_kernel import COASTED, COVARIANCE, MISSES, NOT_CONFIRMED, verdicts
 from fusion.tracking.models import SensorModel
 from fusion.tracking.results import DeletionReason, EventKind, TrackEvent
 from fusion.tracking.trackset import Status, TrackSet
@@ -60,26 +61,24 @@ class Lifecycle:
         ppos, bvar = before.predicted_position(t_ns, self.q2) if predicted is None else predicted
         declared = sensor.covers(ppos)
         chance = hit | (before.seen_by[:, s] if declared is None else declared)
-        chances = after.chances + chance
-        misses = np.where(hit, 0, after.misses + chance)
         seen_by = after.seen_by
+        pvar = bvar
         if hit.any():
             seen_by = seen_by.copy()
             seen_by[hit, s] = True
-        pvar = bvar.copy()
-        if hit.any():
+            pvar = bvar.copy()
             pvar[hit] = after.predicted_position(t_ns, self.q2, np.flatnonzero(hit))[1]
-        tent = after.status == Status.TENTATIVE
-        not_confirmed = tent & (chances >= cfg.confirm_n) & (after.hits < cfg.confirm_m)
-        missed = ~tent & (misses > cfg.max_misses)
-        coasted = (t_ns - after.t_ns) > self.coast_ns
         too_wide = pvar.max(axis=1) > cfg.max_position_std_m**2 if pvar.size else np.zeros(len(after), bool)
-        delete = not_confirmed | missed | coasted | too_wide
-        # a confirmed track that misses its first chance after a hit starts coasting
-        coasting = ~tent & ~delete & (misses == 1) & (after.misses == 0)
-        events = [TrackEvent(EventKind.COASTING, int(after.ids[i]), t_ns) for i in np.flatnonzero(coasting).tolist()]
-        for i in np.flatnonzero(delete).tolist():
-            why = (DeletionReason.NOT_CONFIRMED if not_confirmed[i] else DeletionReason.MISSES if missed[i]
-                   else DeletionReason.COASTED if coasted[i] else DeletionReason.COVARIANCE)
-            events.append(TrackEvent(EventKind.DELETED, int(after.ids[i]), t_ns, why))
+        chances, misses, why, coasting = verdicts(
+            hit, chance, after.chances, after.misses, after.status == Status.TENTATIVE, after.hits, after.t_ns,
+            too_wide, t_ns, cfg.confirm_n, cfg.confirm_m, cfg.max_misses, self.coast_ns)
+        delete = why != 0
+        ids = after.ids
+        events = [TrackEvent(EventKind.COASTING, int(ids[i]), t_ns) for i in np.flatnonzero(coasting).tolist()]
+        events.extend(TrackEvent(EventKind.DELETED, int(ids[i]), t_ns, _REASONS[w])
+                      for i, w in zip(np.flatnonzero(delete).tolist(), why[delete].tolist(), strict=True))
         return Sweep({"chances": chances, "misses": misses, "seen_by": seen_by}, delete, events)
+
+
+_REASONS = {NOT_CONFIRMED: DeletionReason.NOT_CONFIRMED, MISSES: DeletionReason.MISSES,
+            COASTED: DeletionReason.COASTED, COVARIANCE: DeletionReason.COVARIANCE}

@@ -34,7 +34,8 @@ from fusion.core.checks import Array
 from fusion.tracking.detection import Detection
 from fusion.tracking.results import Association, EventKind, Outcome, ScanKey
 from fusion.tracking.scan import Coarse, ScanContext, ScanOutcome, Tally, measured_points, run_scan
-from fusion.tracking.trackset import TrackSet, member
+from fusion.tracking.id_sets import grown, member
+from fusion.tracking.trackset import TrackSet
 
 
 @dataclass(frozen=True)
@@ -146,16 +147,8 @@ def _reach(seed_ids: np.ndarray, seed_seqs: np.ndarray, old_gates: Gates, new_ga
            ) -> tuple[np.ndarray, np.ndarray]:
     """(track ids, detection seqs) in the components of the seeds over the pairs of both runs:
     grown from the seeds along the pairs until nothing is added."""
-    e_ids = np.concatenate([new_gates.ids, old_gates.ids])
-    e_seqs = np.concatenate([new_gates.seqs, old_gates.seqs])
-    hot_ids, hot_seqs = np.unique(seed_ids), np.unique(seed_seqs)
-    while True:
-        m = member(e_ids, hot_ids) | member(e_seqs, hot_seqs)
-        more_ids = np.union1d(hot_ids, e_ids[m])
-        more_seqs = np.union1d(hot_seqs, e_seqs[m])
-        if more_ids.size == hot_ids.size and more_seqs.size == hot_seqs.size:
-            return hot_ids, hot_seqs
-        hot_ids, hot_seqs = more_ids, more_seqs
+    return grown(np.concatenate([new_gates.ids, old_gates.ids]), np.concatenate([new_gates.seqs, old_gates.seqs]),
+                 seed_ids, seed_seqs)
 
 
 def _sub_coarse(ids: np.ndarray, sub_seqs: np.ndarray, js: np.ndarray, gates: Gates) -> Coarse:

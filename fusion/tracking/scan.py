@@ -38,6 +38,8 @@ from fusion.tracking.results import (
 )
 from fusion.tracking.trackset import Rows, Status, TrackSet, track_id_for
 
+_LABELS = {int(s): s.label for s in Status}
+
 
 class Tally(StrEnum):
     """What a scan counts (deletions are counted by their DeletionReason)."""
@@ -95,8 +97,7 @@ def run_scan(ts: TrackSet, key: ScanKey, dets: tuple[Detection, ...], ctx: ScanC
     the scan's coarse gate if the caller knows it (a partial re-run: fusion.tracking.replay)."""
     t_ns, sensor_id = key
     sm = ctx.sensors[sensor_id]
-    meas = Measured.of(tuple(d.z for d in dets), tuple(d.R for d in dets),  # type: ignore[arg-type]
-                       tuple(sm.by_dim[d.z.shape[0]] for d in dets))
+    meas = _measured(sm, dets)
     tpos, tvar = ts.predicted_position(t_ns, ctx.q2)
     if coarse is None:
         mpos, mvar = _measured_points(sm, meas)
@@ -114,23 +115,27 @@ def run_scan(ts: TrackSet, key: ScanKey, dets: tuple[Detection, ...], ctx: ScanC
     hits = ts.hits[ti] + 1
     confirm = ctx.lifecycle.confirms(ts.status[ti], hits, ts.chances[ti] + 1)
     status = np.where(confirm, np.int8(Status.CONFIRMED), ts.status[ti]).astype(np.int8)
-    seqs = np.array([dets[j].seq for j in mj.tolist()], dtype=np.int64)
-    updated_rows = Rows(ts.ids[ti], status, hits, ts.birth_t_ns[ti], np.full(ti.size, t_ns, np.int64),
-                        ts.chances[ti], ts.misses[ti], ts.seen_by[ti], ts.origin_sensor[ti], ts.origin_seq[ti],
-                        np.full(ti.size, sm.index, np.int32), seqs, taken.X, taken.P, taken.MX, taken.MP, taken.MU)
+    det_seqs = np.fromiter((d.seq for d in dets), dtype=np.int64, count=len(dets))
+    seqs = det_seqs[mj]
+    # what an update changes in a row (its id, birth, origin and counters stay)
+    changes = {"status": status, "hits": hits, "t_ns": np.full(ti.size, t_ns, np.int64),
+               "last_sensor": np.full(ti.size, sm.index, np.int32), "last_seq": seqs, "X": taken.X, "P": taken.P,
+               "MX": taken.MX, "MP": taken.MP, "MU": taken.MU}
+    updated_ids = ts.ids[ti]
     events = [TrackEvent(EventKind.CONFIRMED, int(ts.ids[i]), t_ns) for i in ti[confirm].tolist()]
     tally[Tally.CONFIRMATIONS] += len(events)
-    ids, nis = ts.ids.tolist(), gated.nis.tolist()
-    labels = {int(s): s.label for s in Status}
+    est_ids = updated_ids.tolist()
+    nis = gated.nis[pairs].tolist()
+    mj_list = mj.tolist()
     MU = [None] * ti.size if taken.MU is None else list(taken.MU)
     estimates = [
-        Estimate(ids[i], t_ns, sensor_id, seq, x, P, labels[st], 0, nis[p], y, S, mu, mpos[j], px, pP, H)
-        for p, i, j, seq, st, x, P, y, S, mu, px, pP, H in zip(
-            pairs, ti.tolist(), mj.tolist(), seqs.tolist(), status.tolist(), list(taken.X), list(taken.P), taken.y,
-            taken.S, MU, taken.prior_x, taken.prior_P, taken.H, strict=True)
+        Estimate(tid, t_ns, sensor_id, seq, x, P, _LABELS[st], 0, v, y, S, mu, mp, px, pP, H)
+        for tid, seq, st, x, P, v, y, S, mu, mp, px, pP, H in zip(
+            est_ids, seqs.tolist(), status.tolist(), list(taken.X), list(taken.P), nis, taken.y, taken.S, MU,
+            list(mpos[mj]), taken.prior_x, taken.prior_P, taken.H, strict=True)
     ]
 
-    assoc, born, born_j = _births_and_associations(ts, key, dets, gated, dict(zip(mj.tolist(), pairs, strict=True)),
+    assoc, born, born_j = _births_and_associations(ts, key, dets, gated, dict(zip(mj_list, pairs, strict=True)),
                                                    ctx, sm, mpos, tally)
     for b in range(born.ids.size):
         tid = int(born.ids[b])
@@ -143,7 +148,7 @@ def run_scan(ts: TrackSet, key: ScanKey, dets: tuple[Detection, ...], ctx: ScanC
                                   None if born.MU is None else born.MU[b], mpos[born_j[b]]))
     tally[Tally.BIRTHS] += born.ids.size
 
-    updated = ts.derive(update=(ti, updated_rows))
+    updated = ts.derive(update=(ti, changes))
     hit = np.zeros(len(ts), dtype=bool)
     hit[ti] = True
     sweep = ctx.lifecycle.sweep(ts, updated, hit, sm, t_ns, (tpos, tvar))
@@ -152,7 +157,11 @@ def run_scan(ts: TrackSet, key: ScanKey, dets: tuple[Detection, ...], ctx: ScanC
             tally[ev.reason] += 1
     events.extend(sweep.events)
     after = updated.derive(counters=sweep.counters, delete=sweep.delete, born=born)
-    estimates.sort(key=lambda e: e.track_id)
+    if born.ids.size:  # track ids are unique: sorted by id (stably, as sorted() would)
+        order = np.argsort(np.concatenate([updated_ids, born.ids]), kind="stable").tolist()
+        estimates = [estimates[k] for k in order]
+    elif ti.size > 1 and not (np.diff(updated_ids) > 0).all():
+        estimates = [estimates[k] for k in np.argsort(updated_ids, kind="stable").tolist()]
     return ScanOutcome(after, estimates, events, assoc, tally, mpos, mvar, (ci, cj))
 
 
@@ -173,13 +182,13 @@ def _births_and_associations(ts: TrackSet, key: ScanKey, dets: tuple[Detection, 
     births: list[int] = []
     room = ctx.max_tracks - len(ts)
     unassigned = refused = 0
-    for j, d in enumerate(dets):
-        lo, hi = bounds[j], bounds[j + 1]
-        near = tuple(gids[lo:hi])
+    updated = Outcome.UPDATED
+    for j, (d, lo, hi) in enumerate(zip(dets, bounds, bounds[1:])):
         p = taken.get(j)
         if p is not None:
-            assoc.append(Association(sensor_id, t_ns, d.seq, Outcome.UPDATED, gids[p], nis[p], near))
+            assoc.append(Association(sensor_id, t_ns, d.seq, updated, gids[p], nis[p], tuple(gids[lo:hi])))
             continue
+        near = tuple(gids[lo:hi])
         if near:  # in a gate, but no track took it
             unassigned += 1
         if len(births) >= room:
@@ -223,12 +232,21 @@ def _assign_confirmed_first(g: Gated, ts: TrackSet, n_meas: int) -> list[int]:
 
 def measured_points(sm: SensorModel, dets: tuple[Detection, ...]) -> tuple[Array, Array]:
     """World points and per-axis variances of a scan's detections, as run_scan computes them."""
-    return _measured_points(sm, Measured.of(tuple(d.z for d in dets), tuple(d.R for d in dets),  # type: ignore[arg-type]
-                                            tuple(sm.by_dim[d.z.shape[0]] for d in dets)))
+    return _measured_points(sm, _measured(sm, dets))
+
+
+def _measured(sm: SensorModel, dets: tuple[Detection, ...]) -> Measured:
+    """The scan's measurements with their models and noise (fusion.tracking.gating.Measured)."""
+    zs = tuple([d.z for d in dets])
+    by_dim = sm.by_dim
+    return Measured.of(zs, tuple([d.R for d in dets]), tuple([by_dim[z.shape[0]] for z in zs]))  # type: ignore[misc]
 
 
 def _measured_points(sm: SensorModel, meas: Measured) -> tuple[Array, Array]:
     """World points of the scan's measurements and per-axis variances, one call per dimension."""
+    if len(meas.Z) == 1:  # one dimension: the stacks are the measurements in order
+        (m, Z), = meas.Z.items()
+        return sm.positions(Z, meas.Rs[m])
     M = meas.dims.size
     mpos = np.empty((M, sm.ndim))
     mvar = np.empty((M, sm.ndim))

@@ -14,6 +14,7 @@ the lifecycle are vectorised over tracks and a scan builds no per-track objects:
 
 from __future__ import annotations
 
+import functools
 import hashlib
 from dataclasses import dataclass, fields
 from enum import IntEnum
@@ -23,6 +24,7 @@ import numpy as np
 from fusion.core.checks import Array
 from fusion.core.gaussian import GaussianState
 from fusion.core.imm import IMMState
+from fusion.tracking.id_sets import member
 
 
 class Status(IntEnum):
@@ -37,12 +39,13 @@ class Status(IntEnum):
 _LABELS = {Status.TENTATIVE: "tentative", Status.CONFIRMED: "confirmed"}
 
 
-def member(values: np.ndarray, of: np.ndarray) -> np.ndarray:
-    """values[i] in `of`, for each i (np.isin by sorting `of`: faster on the small arrays here)."""
-    if of.size == 0 or values.size == 0:
-        return np.zeros(values.shape, dtype=bool)
-    srt = np.sort(of)
-    return srt[np.minimum(np.searchsorted(srt, values), srt.size - 1)] == values
+@functools.cache
+def _entries(pos_idx: tuple[int, ...], vel_idx: tuple[int, ...], n: int) -> tuple[np.ndarray, ...]:
+    """Column indices of the positions and velocities in X, and of P_pp, P_pv, P_vv per axis in
+    P flattened row-major to n * n columns."""
+    pv = tuple(zip(pos_idx, vel_idx, strict=False))
+    return (np.array(pos_idx, np.intp), np.array(vel_idx, np.intp), np.array([p * (n + 1) for p in pos_idx], np.intp),
+            np.array([p * n + v for p, v in pv], np.intp), np.array([v * (n + 1) for _, v in pv], np.intp))
 
 
 def track_id_for(sensor_id: str, seq: int, t_ns: int) -> int:
@@ -191,14 +194,16 @@ class TrackSet:
         """Constant-velocity extrapolation of every track's position to t_ns (of tracks `rows`
         only, if given: elementwise, so the same bits as those rows of the whole), with the
         per-axis variance P_pp + 2 dt P_pv + dt^2 P_vv + q2 dt^3 / 3 (no velocity: P_pp + q2 dt)."""
-        pi, vi = list(self.layout.pos_idx), list(self.layout.vel_idx)
+        L = self.layout
         X, P, t = (self.X, self.P, self.t_ns) if rows is None else (self.X[rows], self.P[rows], self.t_ns[rows])
         dt = ((t_ns - t) * 1e-9)[:, None]
-        pos, vpp = X[:, pi], P[:, pi, pi]
-        if not vi:
+        at_p, at_v, at_pp, at_pv, at_vv = _entries(L.pos_idx, L.vel_idx, L.n_state)
+        flat = P.reshape(P.shape[0], L.n_state * L.n_state)  # P_pp (and P_pv, P_vv) per axis: one gather each
+        pos, vpp = X.take(at_p, axis=1), flat.take(at_pp, axis=1)
+        if not L.vel_idx:
             return pos, vpp + q2 * np.abs(dt)
-        var = vpp + 2.0 * dt * P[:, pi, vi] + dt * dt * P[:, vi, vi] + q2 * dt**3 / 3.0
-        return pos + X[:, vi] * dt, np.maximum(var, 0.0)
+        var = vpp + 2.0 * dt * flat.take(at_pv, axis=1) + dt * dt * flat.take(at_vv, axis=1) + q2 * dt**3 / 3.0
+        return pos + X.take(at_v, axis=1) * dt, np.maximum(var, 0.0)
 
     def take(self, idx: np.ndarray) -> TrackSet:
         """The rows `idx` (indices, in that order) as a set of their own."""
@@ -244,18 +249,19 @@ class TrackSet:
         out[rows] = ~same
         return out
 
-    def derive(self, *, update: tuple[np.ndarray, Rows] | None = None,
+    def derive(self, *, update: tuple[np.ndarray, dict[str, np.ndarray | None]] | None = None,
                counters: dict[str, np.ndarray] | None = None, delete: np.ndarray | None = None,
                born: Rows | None = None) -> TrackSet:
-        """A new set: rows `update[0]` replaced by `update[1]` (all but the counters), the
-        lifecycle `counters` replaced, rows where `delete` is true removed, `born` appended."""
+        """A new set: in rows `update[0]` the columns named in `update[1]` replaced by its
+        values (the others, and the counters, kept), the lifecycle `counters` replaced, rows
+        where `delete` is true removed, `born` appended."""
         cols = {f: getattr(self, f) for f in ROW_FIELDS}
         if update is not None and update[0].size:
             idx, new = update
-            for f in ROW_FIELDS:
+            for f, v in new.items():
                 if f not in COUNTERS and cols[f] is not None:
                     c = cols[f].copy()
-                    c[idx] = getattr(new, f)
+                    c[idx] = v
                     cols[f] = c
         if counters:
             cols.update(counters)

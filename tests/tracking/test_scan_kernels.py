@@ -1,0 +1,192 @@
+"""The compiled and shortened parts of the scan (issue 11) give what the numpy formulations they
+replace gave, bit for bit: the IMM predict's distinct steps and its per-step F, Q kept across
+scans, the innovation per mode indexed in place, the lifecycle's per-row rules, id membership and
+the growth of a re-run's reach, the predicted positions, and a one-dimension scan's stacks."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from fusion.core.compiled_imm import distinct, innovate_modes
+from fusion.core.compiled_stack import innovate_many
+from fusion.core.imm_stack import StepCache, predict_imm
+from fusion.core.modes import Mode, build_imm
+from fusion.tracking.gating import Measured
+from fusion.tracking.id_sets import grown, member
+from fusion.tracking.lifecycle_kernel import COASTED, COVARIANCE, MISSES, NOT_CONFIRMED, verdicts
+from fusion.tracking.trackset import Layout, Rows, TrackSet
+
+
+def _bits(*arrays: np.ndarray) -> list[bytes]:
+    return [a.dtype.str.encode() + str(a.shape).encode() + np.ascontiguousarray(a).tobytes() for a in arrays]
+
+
+def _spd(rng: np.random.Generator, n: int, *lead: int) -> np.ndarray:
+    A = rng.standard_normal((*lead, n, n))
+    return A @ np.swapaxes(A, -1, -2) + 0.5 * np.eye(n)
+
+
+def _imm():
+    return build_imm([Mode("cv", 0.05, 120.0, 0.001), Mode("ct", 0.05, 10.0, 0.001)])
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_distinct_is_numpys_unique_with_inverse(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    dt = rng.choice([0.0, 0.05, 0.1, 0.15, 0.1 + 1e-17, 2.5], size=int(rng.integers(1, 60)))
+    du, inv = distinct(dt)
+    ru, rinv = np.unique(dt, return_inverse=True)
+    assert _bits(du) == _bits(ru)
+    np.testing.assert_array_equal(inv, rinv)
+    assert inv.dtype == np.intp
+
+
+def test_predict_with_kept_steps_is_the_predict_without() -> None:
+    rng = np.random.default_rng(3)
+    imm = _imm()
+    N, M, n = 40, 2, 5
+    steps = StepCache(size=2)
+    for rep in range(5):  # steps repeat, and more kinds than the cache holds: kept, forgotten, rebuilt
+        xs = rng.normal(size=(N, M, n)) * [100.0, 10.0, 100.0, 10.0, 0.05]
+        Ps = _spd(rng, n, N, M)
+        mu = rng.dirichlet([1.0, 1.0], size=N)
+        dt = rng.choice([0.0, 0.05, 0.1, 0.2 * (rep % 3 + 1)], size=N)
+        a = predict_imm(imm, xs, Ps, mu, dt)
+        b = predict_imm(imm, xs, Ps, mu, dt, steps)
+        assert _bits(a.xs, a.Ps, a.c, a.x, a.P) == _bits(b.xs, b.Ps, b.c, b.x, b.P)
+
+
+def test_kept_steps_are_the_models_matrices() -> None:
+    imm = _imm()
+    du = np.array([0.05, 0.1, 0.3])
+    got = StepCache().of(imm, du)
+    for (F, Q), f in zip(got, imm.filters, strict=True):
+        m = f.motion
+        if F is not None:
+            assert _bits(F) == _bits(np.asarray(m.F(du)))
+        assert Q is not None and _bits(Q) == _bits(np.asarray(m.Q(np.zeros((3, 5)), du)))
+
+
+@pytest.mark.parametrize(("n", "m"), [(5, 2), (4, 1), (6, 3)])
+def test_innovation_per_mode_in_place_is_the_stacked_innovation(n: int, m: int) -> None:
+    rng = np.random.default_rng(n + m)
+    K, M, N = 30, 3, 50
+    Ps = _spd(rng, n, K, M)
+    rows = rng.integers(0, K, N).astype(np.intp)
+    Y = rng.normal(size=(N, M, m))
+    H = rng.normal(size=(N, M, m, n))
+    R = _spd(rng, m, N) * 0.1
+    ok, Ss, ll = innovate_modes(Ps, rows, Y, H, R)
+    assert ok
+    for j in range(M):
+        okj, S, _, lj = innovate_many(np.ascontiguousarray(Ps[rows, j]), np.ascontiguousarray(Y[:, j]),
+                                      np.ascontiguousarray(H[:, j]), R)
+        assert okj.all()
+        assert _bits(Ss[:, j], ll[:, j]) == _bits(S, lj)
+    R[5] = -1e6 * np.eye(m)  # one S not positive definite: the whole stack is refused
+    assert not innovate_modes(Ps, rows, Y, H, R)[0]
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_lifecycle_rules_are_the_numpy_rules(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    K = 400
+    hit = rng.random(K) < 0.5
+    chance = hit | (rng.random(K) < 0.5)
+    chances = rng.integers(0, 9, K).astype(np.int64)
+    misses = rng.integers(0, 4, K).astype(np.int64)
+    tent = rng.random(K) < 0.4
+    hits = rng.integers(0, 6, K).astype(np.int64)
+    t_ns = 10**10
+    t = t_ns - rng.integers(0, 3 * 10**9, K).astype(np.int64)
+    too_wide = rng.random(K) < 0.05
+    confirm_n, confirm_m, max_misses, coast_ns = 6, 4, 2, 2 * 10**9
+    c, m, why, coasting = verdicts(hit, chance, chances, misses, tent, hits, t, too_wide, t_ns, confirm_n,
+                                   confirm_m, max_misses, coast_ns)
+    rc = chances + chance
+    rm = np.where(hit, 0, misses + chance)
+    not_confirmed = tent & (rc >= confirm_n) & (hits < confirm_m)
+    missed = ~tent & (rm > max_misses)
+    coasted = (t_ns - t) > coast_ns
+    delete = not_confirmed | missed | coasted | too_wide
+    rcoasting = ~tent & ~delete & (rm == 1) & (misses == 0)
+    rwhy = np.select([not_confirmed, missed, coasted, too_wide], [NOT_CONFIRMED, MISSES, COASTED, COVARIANCE], 0)
+    assert _bits(c, m) == _bits(rc, rm)
+    np.testing.assert_array_equal(why, rwhy)
+    np.testing.assert_array_equal(why != 0, delete)
+    np.testing.assert_array_equal(coasting, rcoasting)
+    assert delete.any() and rcoasting.any() and len(set(rwhy.tolist())) == 5
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_member_is_isin(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    of = rng.integers(-(2**62), 2**62, int(rng.integers(1, 50)))
+    values = np.concatenate([of[rng.integers(0, of.size, 20)], rng.integers(-(2**62), 2**62, 20)])
+    rng.shuffle(values)
+    np.testing.assert_array_equal(member(values, of), np.isin(values, of))
+    assert member(values, of[:0]).shape == values.shape and not member(values, of[:0]).any()
+    assert member(values[:0], of).shape == (0,)
+
+
+def _grown_reference(e_ids, e_seqs, seed_ids, seed_seqs):
+    """The growth loop fusion.tracking.replay ran before (np.isin, np.union1d)."""
+    hot_ids, hot_seqs = np.unique(seed_ids), np.unique(seed_seqs)
+    while True:
+        m = np.isin(e_ids, hot_ids) | np.isin(e_seqs, hot_seqs)
+        more_ids, more_seqs = np.union1d(hot_ids, e_ids[m]), np.union1d(hot_seqs, e_seqs[m])
+        if more_ids.size == hot_ids.size and more_seqs.size == hot_seqs.size:
+            return hot_ids, hot_seqs
+        hot_ids, hot_seqs = more_ids, more_seqs
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_reach_growth_is_the_loop_it_replaced(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    ids = rng.integers(0, 2**62, 60)
+    E = 90
+    e_ids = ids[rng.integers(0, ids.size, E)]
+    e_seqs = rng.integers(0, 80, E).astype(np.int64)
+    seed_ids = ids[rng.integers(0, ids.size, int(rng.integers(0, 3)))]
+    seed_seqs = rng.integers(0, 80, int(rng.integers(0, 3))).astype(np.int64)
+    a = grown(e_ids, e_seqs, seed_ids, seed_seqs)
+    b = _grown_reference(e_ids, e_seqs, seed_ids, seed_seqs)
+    assert _bits(*a) == _bits(*(x.astype(np.int64) for x in b))
+
+
+@pytest.mark.parametrize("vel", [True, False], ids=["pos-vel", "pos-only"])
+def test_predicted_position_is_the_fancy_indexed_formula(vel: bool) -> None:
+    rng = np.random.default_rng(11)
+    K, n = 25, 5
+    pi, vi = ((0, 2), (1, 3)) if vel else ((0, 2), ())
+    L = Layout(pi, vi, ("a",), n)
+    rows = Rows.empty(L)
+    ts = TrackSet(Rows(*(np.resize(getattr(rows, f), (K, *getattr(rows, f).shape[1:]))
+                         for f in ("ids", "status", "hits", "birth_t_ns")),
+                       rng.integers(0, 10**9, K).astype(np.int64),
+                       *(np.resize(getattr(rows, f), (K, *getattr(rows, f).shape[1:]))
+                         for f in ("chances", "misses", "seen_by", "origin_sensor", "origin_seq", "last_sensor",
+                                   "last_seq")),
+                       rng.normal(size=(K, n)), _spd(rng, n, K)), L)
+    t, q2 = 2 * 10**9, 0.3
+    pos, var = ts.predicted_position(t, q2)
+    X, P = ts.X, ts.P
+    dt = ((t - ts.t_ns) * 1e-9)[:, None]
+    p, v = list(pi), list(vi)
+    if vel:
+        rvar = np.maximum(P[:, p, p] + 2.0 * dt * P[:, p, v] + dt * dt * P[:, v, v] + q2 * dt**3 / 3.0, 0.0)
+        rpos = X[:, p] + X[:, v] * dt
+    else:
+        rvar, rpos = P[:, p, p] + q2 * np.abs(dt), X[:, p]
+    assert _bits(pos, var) == _bits(rpos, rvar)
+
+
+def test_one_dimension_scan_is_stacked_as_the_grouped_one() -> None:
+    rng = np.random.default_rng(5)
+    z = tuple(rng.normal(size=2) for _ in range(7))
+    R = tuple(_spd(rng, 2) for _ in range(7))
+    one = Measured.of(z, R, (None,) * 7)  # type: ignore[arg-type]
+    mixed = Measured.of((*z, rng.normal(size=3)), (*R, _spd(rng, 3)), (None,) * 8)  # type: ignore[arg-type]
+    assert list(one.Z) == [2] and _bits(one.Z[2], one.Rs[2], one.at) == _bits(mixed.Z[2], mixed.Rs[2], mixed.at[:7])
+    np.testing.assert_array_equal(one.dims, mixed.dims[:7])
