@@ -29,12 +29,12 @@ from tests.service.harness import client, query, scenario_config
 INTERVAL_S = 1.0  # checkpoint interval of the service under test
 
 
-def _config(tmp: Path) -> Path:
-    """configs/service.toml with checkpoints every INTERVAL_S and recordings flushed every 0.2 s."""
+def _config(tmp: Path, interval_s: float = INTERVAL_S, name: str = "service.toml") -> Path:
+    """configs/service.toml with checkpoints every interval_s and recordings flushed every 0.2 s."""
     text = SERVICE_TOML.read_text()
     assert text.rstrip().endswith('prefix = "fusion"'), "[recording] is no longer the last section"
-    p = tmp / "service.toml"
-    p.write_text(text.rstrip() + f"\nflush_interval_s = 0.2\n\n[checkpoint]\ninterval_s = {INTERVAL_S}\n")
+    p = tmp / name
+    p.write_text(text.rstrip() + f"\nflush_interval_s = 0.2\n\n[checkpoint]\ninterval_s = {interval_s}\n")
     return p
 
 
@@ -179,8 +179,10 @@ def test_sigkill_at_random_moments_leaves_readable_files_and_a_whole_checkpoint(
         return _shifted(chosen, time.monotonic_ns() - t0)
 
     sent: list[list[Sample]] = []
-    # 1: killed before the first checkpoint write (INTERVAL_S after start), while samples arrive
-    sv = Served(cfg_path, rec, tmp_path)
+    # 1: killed before the first checkpoint write, while samples arrive (a service whose first
+    # write is due a minute after its start: on a loaded machine, start-up and the feed can take
+    # longer than INTERVAL_S, and the write this phase must come before would happen first)
+    sv = Served(_config(tmp_path, 60.0, "service-first.toml"), rec, tmp_path)
     last = _feed_then_kill(sv, part(0.0, 4.0), sent, writes=0, then_s=rng.uniform(0.1, 0.4))
     assert last.checkpoint is not None and last.checkpoint.written == 0
     _check_after_kill(rec, tmp_path, cfg_path, sent, last, checkpoint="absent")
