@@ -9,7 +9,8 @@ messages from the same publisher process to a subscriber process that only count
 Latency: scans due on the wall clock (t_ns = due time), each sent as one burst, at 1k and 10k
 measurements/s offered (67 and 667 targets at 15 messages per target per second); latency =
 arrival of an estimate at a subscriber here - its t_ns, the first revision of each estimate,
-after a warm-up of 2 s. Soak: 10k/s offered for soak_s, the service's VmRSS every 10 s.
+after a warm-up of 2 s. Soak: 10k/s offered for soak_s, the service's resident memory every 10 s
+(fusion.io.memory: total, anonymous, file-backed); spread and slope over the samples after the first minute.
 """
 
 from __future__ import annotations
@@ -26,6 +27,7 @@ import numpy as np
 from bench.e2e_load import MSGS_PER_TARGET_S
 from bench.e2e_procs import Publisher, ServiceProcess, zenoh_baseline
 from fusion import messages as m
+from fusion.io.memory import process_memory
 
 
 def _counts_add_up(c: m.Counts) -> bool:
@@ -189,7 +191,8 @@ def soak_run(pub: Publisher, folder: Path, *, duration_s: float, rate: int = 10_
             if pub.conn.poll(max(wait, 0.0)):
                 break
             st = svc.status()
-            samples.append({"t_s": k * every_s, "rss_mb": svc.rss_kb() / 1024,
+            mem = process_memory(svc.pid)
+            samples.append({"t_s": k * every_s, "rss_mb": mem.rss_mb, "anon_mb": mem.anon_mb, "file_mb": mem.file_mb,
                             "queued": st.counts.queued if st else None, "applied": st.counts.applied if st else None,
                             "recording_bytes": st.recording_bytes if st else None})
             k += 1
@@ -197,20 +200,38 @@ def soak_run(pub: Publisher, folder: Path, *, duration_s: float, rate: int = 10_
         st = svc.status()
         end_rss = svc.rss_kb() / 1024
         pub.call("disconnect")
-    rss = np.array([s["rss_mb"] for s in samples])
-    t = np.array([s["t_s"] for s in samples])
-    slope = float(np.polyfit(t, rss, 1)[0] * 60) if len(rss) >= 2 else float("nan")
-    late = rss[t >= 60] if (t >= 60).sum() >= 2 else rss
     c = st.counts if st else None
     return {
         "duration_s": duration_s, "rate": rate, "recording": recording, "targets": targets, "sent": sent["sent"],
-        "samples": samples,
-        "rss_start_mb": float(rss[0]), "rss_end_mb": end_rss, "rss_max_mb": float(rss.max()),
-        "rss_min_mb": float(rss.min()), "slope_mb_per_min": slope,
-        "spread_after_1min": float(late.max() / late.min() - 1),
+        "samples": samples, "rss_end_mb": end_rss, **soak_figures(samples),
         "applied": None if c is None else c.applied, "queued_end": None if c is None else c.queued,
         "refused": None if c is None else dict(c.refused),
         "recording_bytes_per_meas": None if st is None or not c.applied else st.recording_bytes / c.applied,
+    }
+
+
+def soak_figures(samples: list[dict[str, Any]], *, settle_s: float = 60.0) -> dict[str, Any]:
+    """Over a soak's samples (t_s, rss_mb, anon_mb, queued): start, min and max RSS and its slope
+    (least squares, MB per minute) over all samples, and over those after `settle_s` (the first
+    minute: imports, compiled kernels, the tracks' birth, the history window filling) the spread
+    max/min - 1 of RSS and of anonymous memory, min, max, slope and the largest backlog (queued)."""
+    rss = np.array([s["rss_mb"] for s in samples])
+    anon = np.array([s["anon_mb"] for s in samples])
+    t = np.array([s["t_s"] for s in samples])
+    after = t >= settle_s if (t >= settle_s).sum() >= 2 else np.ones(len(t), dtype=bool)
+    late = rss[after]
+
+    def slope(tt: np.ndarray, y: np.ndarray) -> float:
+        return float(np.polyfit(tt, y, 1)[0] * 60) if len(y) >= 2 else float("nan")
+
+    queued = [s["queued"] for s, a in zip(samples, after.tolist(), strict=True) if a and s["queued"] is not None]
+    return {
+        "rss_start_mb": float(rss[0]), "rss_max_mb": float(rss.max()), "rss_min_mb": float(rss.min()),
+        "slope_mb_per_min": slope(t, rss), "spread_after_1min": float(late.max() / late.min() - 1),
+        "rss_min_after_1min_mb": float(late.min()), "rss_max_after_1min_mb": float(late.max()),
+        "slope_after_1min_mb_per_min": slope(t[after], late),
+        "anon_spread_after_1min": float(anon[after].max() / anon[after].min() - 1),
+        "queued_max_after_1min": max(queued, default=None),
     }
 
 
