@@ -51,6 +51,10 @@ class Codec(Protocol):
 
     def detection(self, payload: bytes, arrival_ns: int | None = None) -> Detection: ...
 
+    def detections(self, samples: Sequence[tuple[int | None, bytes]]) -> list[Detection | None]:
+        """detection() of each (arrival_ns, payload), None where it would raise (no side effects)."""
+        ...
+
     def control(self, payload: bytes, arrival_ns: int | None = None) -> ControlInput: ...
 
     def truth(self, payload: bytes, layout: tuple[str, ...]) -> tuple[str, int, np.ndarray] | None:
@@ -153,6 +157,11 @@ class Pipeline:
             log.exception("unexpected error decoding a sample on %s", key)
             self._refuse(Reason.MALFORMED, key, f"{type(e).__name__}: {e}")
             return None
+        return self._checked(d, key, key_id, arrival_ns)
+
+    def _checked(self, d: Detection, key: str, key_id: str, arrival_ns: int) -> Detection | None:
+        """A decoded measurement on its key: refused (and counted) when it names another sensor
+        or lies too far ahead of its arrival; else counted in the latency and gap statistics."""
         sensor, t_ns = d.sensor_id, d.t_ns
         if sensor != key_id:
             self._refuse(Reason.KEY_MISMATCH, key, f"a measurement of sensor {sensor!r} on another sensor's key", t_ns)
@@ -168,10 +177,19 @@ class Pipeline:
     def ingest(self, records: Sequence[Record]) -> Output:
         """Process samples in arrival order; return the tracker's result and what to publish."""
         dets: list[Detection | ControlInput] = []
-        decode = self._decode
-        for arrival_ns, key, payload in records:
-            self._received += 1
-            d = decode(arrival_ns, key, payload)
+        decode, checked, route = self._decode, self._checked, self._route
+        routes = [route(key) for _, key, _ in records]
+        # every measurement's payload decoded in one loop (Codec.detections); a None there, and
+        # every other kind of sample, goes the one-sample way, so refusals are those of _decode
+        samples = [(r[0], r[2]) for r, (kind, _) in zip(records, routes) if kind == "meas"]
+        try:
+            fast = iter(self.codec.detections(samples))
+        except Exception:  # noqa: BLE001 (a decoder bug: each sample then fails alone in _decode, logged)
+            fast = iter([None] * len(samples))
+        self._received += len(records)
+        for (arrival_ns, key, payload), (kind, key_id) in zip(records, routes):
+            d = next(fast) if kind == "meas" else None
+            d = decode(arrival_ns, key, payload) if d is None else checked(d, key, key_id, arrival_ns)
             if d is not None:
                 dets.append(d)
         last_arrival = records[-1][0] if records else None
