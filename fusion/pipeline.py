@@ -95,6 +95,8 @@ class Pipeline:
         self._truth = 0
         self._refused: dict[Reason, int] = {}  # at the edge, before the tracker
         self._routes: dict[str, tuple[str, str]] = {}  # key expression -> (kind, key id)
+        # per configured sensor, the batch's (latencies, (epoch, seq)s) not yet counted (_checked)
+        self._pending: dict[str, tuple[list[int], list[tuple[int, int]]]] = {}
 
     def counts(self) -> Counts:
         """The tracker's counts with the edge's folded in (see the module docstring)."""
@@ -169,10 +171,20 @@ class Pipeline:
         if self.max_future_wall_ns is not None and t_ns > arrival_ns + self.max_future_wall_ns:
             self._refuse(Reason.FUTURE, key, f"sensor time {(t_ns - arrival_ns) / 1e9:.1f} s ahead of arrival", t_ns)
             return None
-        if sensor in self.tracker.sensors:
-            self.latency.add(sensor, arrival_ns - t_ns)
-            self.gaps.add(sensor, d.epoch, d.seq)
+        pending = self._pending.get(sensor)
+        if pending is None and sensor in self.tracker.sensors:
+            pending = self._pending[sensor] = ([], [])
+        if pending is not None:  # added to the statistics at the end of the batch, in this order
+            pending[0].append(arrival_ns - t_ns)
+            pending[1].append((d.epoch, d.seq))
         return d
+
+    def _count_pending(self) -> None:
+        """The latency and gap statistics of the batch's measurements (_checked), in order."""
+        for sensor, (lat, seqs) in self._pending.items():
+            self.latency.add_many(sensor, lat)
+            self.gaps.add_many(sensor, seqs)
+        self._pending.clear()
 
     def ingest(self, records: Sequence[Record]) -> Output:
         """Process samples in arrival order; return the tracker's result and what to publish."""
@@ -187,11 +199,14 @@ class Pipeline:
         except Exception:  # noqa: BLE001 (a decoder bug: each sample then fails alone in _decode, logged)
             fast = iter([None] * len(samples))
         self._received += len(records)
-        for (arrival_ns, key, payload), (kind, key_id) in zip(records, routes):
-            d = next(fast) if kind == "meas" else None
-            d = decode(arrival_ns, key, payload) if d is None else checked(d, key, key_id, arrival_ns)
-            if d is not None:
-                dets.append(d)
+        try:
+            for (arrival_ns, key, payload), (kind, key_id) in zip(records, routes):
+                d = next(fast) if kind == "meas" else None
+                d = decode(arrival_ns, key, payload) if d is None else checked(d, key, key_id, arrival_ns)
+                if d is not None:
+                    dets.append(d)
+        finally:
+            self._count_pending()
         last_arrival = records[-1][0] if records else None
         result = self.tracker.process(dets)
         for r in result.refused:
