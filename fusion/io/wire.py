@@ -226,6 +226,20 @@ def estimate_encoder(layout: tuple[str, ...], model: str) -> Callable[[Estimate]
     return enc
 
 
+def estimates_encoder(layout: tuple[str, ...], model: str) -> Callable[[Sequence[Estimate]], list[bytes]]:
+    """es -> [estimate_encoder(layout, model)(e) for e in es], the same bytes, in one loop."""
+    names = list(layout)
+    encode, out, v = m.encode, _EstimateOut, m.SCHEMA_VERSION
+
+    def enc_all(es: Sequence[Estimate]) -> list[bytes]:
+        return [encode(out(v, e.track_id, e.t_ns, e.sensor_id, e.seq if e.seq > 0 else 0, e.x.tolist(),  # type: ignore[arg-type]
+                           e.P.ravel().tolist(), names if e.x.size else [], model, e.status, e.revision, e.nis,
+                           None if e.mode_probabilities is None else e.mode_probabilities.tolist()))
+                for e in es]
+
+    return enc_all
+
+
 def encode_status(status: dict[str, Any]) -> bytes:
     c = status["counts"]
     msg = m.ServiceStatus(

@@ -151,3 +151,22 @@ def test_detections_of_shares_the_diagonal_R() -> None:
         if x.R is not None and not x.R.flags.writeable:
             assert x.R is y.R
     assert np.array_equal(a[0].R, np.diag([25.0, 0.003**2]))
+
+
+def test_estimates_encoder_is_estimate_encoder_of_each() -> None:
+    from fusion.tracking.results import Estimate
+
+    rng = np.random.default_rng(3)
+    layout = ("x", "vx", "y", "vy", "omega")
+    ests = [Estimate(int(rng.integers(0, 2**40)), int(rng.integers(-2**62, 2**62)), "radar1",
+                     int(rng.integers(-1, 2**40)), rng.normal(size=5), rng.normal(size=(5, 5)),
+                     str(rng.choice(["confirmed", "tentative", "retracted", "predicted"])), int(rng.integers(0, 9)),
+                     None if i % 3 else float(rng.normal()), None, None,
+                     None if i % 2 else rng.dirichlet([1.0, 1.0]))
+            for i in range(200)]
+    ests.append(Estimate.retraction((7, 5, "cam1"), 3))  # no state: an empty layout
+    one = wire.estimate_encoder(layout, "imm")
+    many = wire.estimates_encoder(layout, "imm")(ests)
+    assert many == [one(e) for e in ests]
+    assert many == [m.encode(wire.estimate_message(e, layout=layout, model="imm")) for e in ests]
+    assert wire.estimates_encoder(layout, "imm")([]) == []
