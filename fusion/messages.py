@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import math
 import re
-from collections.abc import Iterable
+from collections.abc import Callable
 from typing import Annotated, Literal
 
 import msgspec
@@ -342,19 +342,10 @@ def decode_measurement(data: bytes) -> Measurement:
     return _decode(_dec_meas, data, "measurement")  # type: ignore[return-value]
 
 
-def decode_measurements(payloads: Iterable[bytes]) -> list[Measurement | None]:
-    """decode_measurement of each payload, in one loop: the Measurement, or None where
-    decode_measurement raises (call it on that payload for the typed error). The same decoder,
-    so a payload decodes here exactly when it decodes alone, to the same message."""
-    dec = _dec_meas.decode
-    out: list[Measurement | None] = []
-    add = out.append
-    for p in payloads:
-        try:
-            add(dec(p))
-        except Exception:  # noqa: BLE001 (not swallowed: the caller decodes it alone and gets the error)
-            add(None)
-    return out
+def measurement_decoder() -> Callable[[bytes], Measurement]:
+    """The decode behind decode_measurement, for a loop over many payloads: it raises msgspec's
+    errors, not the typed ones; hand a payload it fails on to decode_measurement for those."""
+    return _dec_meas.decode
 
 
 def decode_input(data: bytes) -> Input:

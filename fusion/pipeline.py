@@ -16,8 +16,9 @@ is every sample handed to `ingest` and duplicates are refusals with reason "dupl
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import logging
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -51,7 +52,7 @@ class Codec(Protocol):
 
     def detection(self, payload: bytes, arrival_ns: int | None = None) -> Detection: ...
 
-    def detections(self, samples: Sequence[tuple[int | None, bytes]]) -> list[Detection | None]:
+    def detections(self, samples: Iterable[tuple[int | None, bytes]]) -> list[Detection | None]:
         """detection() of each (arrival_ns, payload), None where it would raise (no side effects)."""
         ...
 
@@ -193,11 +194,10 @@ class Pipeline:
         routes = [route(key) for _, key, _ in records]
         # every measurement's payload decoded in one loop (Codec.detections); a None there, and
         # every other kind of sample, goes the one-sample way, so refusals are those of _decode
-        samples = [(r[0], r[2]) for r, (kind, _) in zip(records, routes) if kind == "meas"]
         try:
-            fast = iter(self.codec.detections(samples))
+            fast = iter(self.codec.detections((r[0], r[2]) for r, rt in zip(records, routes) if rt[0] == "meas"))
         except Exception:  # noqa: BLE001 (a decoder bug: each sample then fails alone in _decode, logged)
-            fast = iter([None] * len(samples))
+            fast = itertools.repeat(None)
         self._received += len(records)
         try:
             for (arrival_ns, key, payload), (kind, key_id) in zip(records, routes):

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import functools
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import asdict
 from typing import Any
 
@@ -62,33 +62,6 @@ def detection_of(msg: m.Measurement, arrival_ns: int | None = None) -> Detection
     return Detection(msg.sensor_id, msg.t_ns, msg.seq, z, R, arrival_ns, msg.epoch, False)
 
 
-def detections_of(msgs: Sequence[m.Measurement], arrivals: Sequence[int | None]) -> list[Detection]:
-    """[detection_of(msg, a) for msg, a in zip(msgs, arrivals)], the same Detections (the same
-    shared R arrays), with the two shapes the shipped sensors send (a 2-D radar return with its
-    noise, a 2-D position with per-axis std) built inline: no call per message but numpy's."""
-    out: list[Detection] = []
-    add = out.append
-    radar, cart, memo, array, f64 = m.Radar, m.Cartesian, _DIAGONALS, np.array, np.float64
-    for msg, a in zip(msgs, arrivals, strict=True):
-        d = msg.data
-        if type(d) is radar:
-            rs = d.range_std_m
-            if rs is not None and d.elevation_rad is None and d.range_rate_mps is None:
-                std = (rs, d.bearing_std_rad)
-                R = memo.get(std)  # type: ignore[arg-type]
-                if R is not None:
-                    add(Detection(msg.sensor_id, msg.t_ns, msg.seq, array((d.range_m, d.bearing_rad), dtype=f64), R,
-                                  a, msg.epoch, True))
-                    continue
-        elif type(d) is cart and d.cov_m2 is None and d.std_m is not None:
-            R = memo.get(tuple(d.std_m))
-            if R is not None:
-                add(Detection(msg.sensor_id, msg.t_ns, msg.seq, array(d.pos_m, dtype=f64), R, a, msg.epoch, False))
-                continue
-        add(detection_of(msg, a))  # the general path (and the first message of each noise)
-    return out
-
-
 _DIAGONALS: dict[tuple[float, ...], np.ndarray] = {}
 _DIAGONALS_MAX = 4096
 
@@ -132,17 +105,38 @@ class Codec:
         """Raises MalformedMessageError or InvalidMessageError (fusion.errors) for bad bytes."""
         return detection_of(m.decode_measurement(payload), arrival_ns)
 
-    def detections(self, samples: Sequence[tuple[int | None, bytes]]) -> list[Detection | None]:
-        """detection(payload, arrival_ns) of each (arrival_ns, payload), decoded in one loop
-        (fusion.messages.decode_measurements); None where `detection` would raise: call it on
-        that payload for the error."""
-        msgs = m.decode_measurements([p for _, p in samples])
-        ok = [i for i, msg in enumerate(msgs) if msg is not None]
-        out: list[Detection | None] = [None] * len(msgs)
-        if len(ok) == len(msgs):
-            return detections_of(msgs, [a for a, _ in samples])  # type: ignore[arg-type, return-value]
-        for i, d in zip(ok, detections_of([msgs[i] for i in ok], [samples[i][0] for i in ok]), strict=True):  # type: ignore[misc]
-            out[i] = d
+    def detections(self, samples: Iterable[tuple[int | None, bytes]]) -> list[Detection | None]:
+        """[detection(payload, arrival_ns) for (arrival_ns, payload) in samples], in one loop,
+        with None where `detection` would raise (call it on that payload for the error). The
+        same Detections (the same shared R arrays): the two shapes the shipped sensors send (a
+        2-D radar return with its noise, a 2-D position with per-axis std) are built inline,
+        the rest by detection_of. Each message is dropped once converted (a list of them would
+        outlive the collector's young generation: measured slower than one at a time)."""
+        dec = m.measurement_decoder()
+        out: list[Detection | None] = []
+        add = out.append
+        radar, cart, memo, array, f64 = m.Radar, m.Cartesian, _DIAGONALS, np.array, np.float64
+        for a, p in samples:
+            try:
+                msg = dec(p)
+            except Exception:  # noqa: BLE001 (not swallowed: the caller decodes it alone and gets the error)
+                add(None)
+                continue
+            d = msg.data
+            if type(d) is radar:
+                rs = d.range_std_m
+                if rs is not None and d.elevation_rad is None and d.range_rate_mps is None:
+                    R = memo.get((rs, d.bearing_std_rad))  # type: ignore[arg-type]
+                    if R is not None:
+                        add(Detection(msg.sensor_id, msg.t_ns, msg.seq, array((d.range_m, d.bearing_rad), dtype=f64),
+                                      R, a, msg.epoch, True))
+                        continue
+            elif type(d) is cart and d.cov_m2 is None and d.std_m is not None:
+                R = memo.get(tuple(d.std_m))
+                if R is not None:
+                    add(Detection(msg.sensor_id, msg.t_ns, msg.seq, array(d.pos_m, dtype=f64), R, a, msg.epoch, False))
+                    continue
+            add(detection_of(msg, a))  # the general path (and the first message of each noise)
         return out
 
     def control(self, payload: bytes, arrival_ns: int | None = None) -> ControlInput:
