@@ -96,8 +96,8 @@ class Pipeline:
         self._truth = 0
         self._refused: dict[Reason, int] = {}  # at the edge, before the tracker
         self._routes: dict[str, tuple[str, str]] = {}  # key expression -> (kind, key id)
-        # per configured sensor, the batch's (latencies, (epoch, seq)s) not yet counted (_checked)
-        self._pending: dict[str, tuple[list[int], list[tuple[int, int]]]] = {}
+        # per configured sensor, the batch's (latencies, epochs, seqs) not yet counted (_checked)
+        self._pending: dict[str, tuple[list[int], list[int], list[int]]] = {}
 
     def counts(self) -> Counts:
         """The tracker's counts with the edge's folded in (see the module docstring)."""
@@ -174,17 +174,18 @@ class Pipeline:
             return None
         pending = self._pending.get(sensor)
         if pending is None and sensor in self.tracker.sensors:
-            pending = self._pending[sensor] = ([], [])
+            pending = self._pending[sensor] = ([], [], [])
         if pending is not None:  # added to the statistics at the end of the batch, in this order
             pending[0].append(arrival_ns - t_ns)
-            pending[1].append((d.epoch, d.seq))
+            pending[1].append(d.epoch)  # ints, not (epoch, seq) tuples: nothing for the collector
+            pending[2].append(d.seq)
         return d
 
     def _count_pending(self) -> None:
         """The latency and gap statistics of the batch's measurements (_checked), in order."""
-        for sensor, (lat, seqs) in self._pending.items():
+        for sensor, (lat, epochs, seqs) in self._pending.items():
             self.latency.add_many(sensor, lat)
-            self.gaps.add_many(sensor, seqs)
+            self.gaps.add_many(sensor, epochs, seqs)
         self._pending.clear()
 
     def ingest(self, records: Sequence[Record]) -> Output:

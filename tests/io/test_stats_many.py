@@ -40,5 +40,5 @@ def test_gaps_add_many_is_add_of_each(seed: int) -> None:
             pairs.append((e, max(seq[e], 0)))
         for e, q in pairs:
             one.add(s, e, q)
-        many.add_many(s, pairs)
+        many.add_many(s, [e for e, _ in pairs], [q for _, q in pairs])
         assert one.report() == many.report()
