@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import math
 import re
+from collections.abc import Callable
 from typing import Annotated, Literal
 
 import msgspec
@@ -339,6 +340,12 @@ def _version(dec: msgspec.msgpack.Decoder | msgspec.json.Decoder, data: bytes | 
 
 def decode_measurement(data: bytes) -> Measurement:
     return _decode(_dec_meas, data, "measurement")  # type: ignore[return-value]
+
+
+def measurement_decoder() -> Callable[[bytes], Measurement]:
+    """The decode behind decode_measurement, for a loop over many payloads: it raises msgspec's
+    errors, not the typed ones; hand a payload it fails on to decode_measurement for those."""
+    return _dec_meas.decode
 
 
 def decode_input(data: bytes) -> Input:

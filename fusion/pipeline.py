@@ -16,8 +16,9 @@ is every sample handed to `ingest` and duplicates are refusals with reason "dupl
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import logging
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -50,6 +51,10 @@ class Codec(Protocol):
         ...
 
     def detection(self, payload: bytes, arrival_ns: int | None = None) -> Detection: ...
+
+    def detections(self, samples: Iterable[tuple[int | None, bytes]]) -> list[Detection | None]:
+        """detection() of each (arrival_ns, payload), None where it would raise (no side effects)."""
+        ...
 
     def control(self, payload: bytes, arrival_ns: int | None = None) -> ControlInput: ...
 
@@ -91,6 +96,8 @@ class Pipeline:
         self._truth = 0
         self._refused: dict[Reason, int] = {}  # at the edge, before the tracker
         self._routes: dict[str, tuple[str, str]] = {}  # key expression -> (kind, key id)
+        # per configured sensor, the batch's (latencies, epochs, seqs) not yet counted (_checked)
+        self._pending: dict[str, tuple[list[int], list[int], list[int]]] = {}
 
     def counts(self) -> Counts:
         """The tracker's counts with the edge's folded in (see the module docstring)."""
@@ -153,6 +160,11 @@ class Pipeline:
             log.exception("unexpected error decoding a sample on %s", key)
             self._refuse(Reason.MALFORMED, key, f"{type(e).__name__}: {e}")
             return None
+        return self._checked(d, key, key_id, arrival_ns)
+
+    def _checked(self, d: Detection, key: str, key_id: str, arrival_ns: int) -> Detection | None:
+        """A decoded measurement on its key: refused (and counted) when it names another sensor
+        or lies too far ahead of its arrival; else counted in the latency and gap statistics."""
         sensor, t_ns = d.sensor_id, d.t_ns
         if sensor != key_id:
             self._refuse(Reason.KEY_MISMATCH, key, f"a measurement of sensor {sensor!r} on another sensor's key", t_ns)
@@ -160,20 +172,42 @@ class Pipeline:
         if self.max_future_wall_ns is not None and t_ns > arrival_ns + self.max_future_wall_ns:
             self._refuse(Reason.FUTURE, key, f"sensor time {(t_ns - arrival_ns) / 1e9:.1f} s ahead of arrival", t_ns)
             return None
-        if sensor in self.tracker.sensors:
-            self.latency.add(sensor, arrival_ns - t_ns)
-            self.gaps.add(sensor, d.epoch, d.seq)
+        pending = self._pending.get(sensor)
+        if pending is None and sensor in self.tracker.sensors:
+            pending = self._pending[sensor] = ([], [], [])
+        if pending is not None:  # added to the statistics at the end of the batch, in this order
+            pending[0].append(arrival_ns - t_ns)
+            pending[1].append(d.epoch)  # ints, not (epoch, seq) tuples: nothing for the collector
+            pending[2].append(d.seq)
         return d
+
+    def _count_pending(self) -> None:
+        """The latency and gap statistics of the batch's measurements (_checked), in order."""
+        for sensor, (lat, epochs, seqs) in self._pending.items():
+            self.latency.add_many(sensor, lat)
+            self.gaps.add_many(sensor, epochs, seqs)
+        self._pending.clear()
 
     def ingest(self, records: Sequence[Record]) -> Output:
         """Process samples in arrival order; return the tracker's result and what to publish."""
         dets: list[Detection | ControlInput] = []
-        decode = self._decode
-        for arrival_ns, key, payload in records:
-            self._received += 1
-            d = decode(arrival_ns, key, payload)
-            if d is not None:
-                dets.append(d)
+        decode, checked, route = self._decode, self._checked, self._route
+        routes = [route(key) for _, key, _ in records]
+        # every measurement's payload decoded in one loop (Codec.detections); a None there, and
+        # every other kind of sample, goes the one-sample way, so refusals are those of _decode
+        try:
+            fast = iter(self.codec.detections((r[0], r[2]) for r, rt in zip(records, routes) if rt[0] == "meas"))
+        except Exception:  # noqa: BLE001 (a decoder bug: each sample then fails alone in _decode, logged)
+            fast = itertools.repeat(None)
+        self._received += len(records)
+        try:
+            for (arrival_ns, key, payload), (kind, key_id) in zip(records, routes):
+                d = next(fast) if kind == "meas" else None
+                d = decode(arrival_ns, key, payload) if d is None else checked(d, key, key_id, arrival_ns)
+                if d is not None:
+                    dets.append(d)
+        finally:
+            self._count_pending()
         last_arrival = records[-1][0] if records else None
         result = self.tracker.process(dets)
         for r in result.refused:

@@ -35,11 +35,15 @@ class PublishedView:
     def select(self, estimates: Iterable[Estimate]) -> tuple[Estimate, ...]:
         """The estimates of one step to publish (see the module docstring); remembers them."""
         out = []
+        latest, tracks, tentative = self.latest, self.tracks, self.publish_tentative
         for e in estimates:
             k = e.key
-            if k in self.latest or e.status == "confirmed" or (self.publish_tentative and e.status == "tentative"):
-                self.latest[k] = e
-                self.tracks[e.track_id] = max(e.t_ns, self.tracks.get(e.track_id, e.t_ns))
+            st = e.status
+            if k in latest or st == "confirmed" or (tentative and st == "tentative"):
+                latest[k] = e
+                tid, t = e.track_id, e.t_ns
+                last = tracks.get(tid)
+                tracks[tid] = t if last is None or t > last else last
                 out.append(e)
         return tuple(out)
 

@@ -232,8 +232,8 @@ class Service:
         BLOCK = self._zenoh.CongestionControl.BLOCK
         encoded = self._encoded
         pubs = self._publishers()
-        for e in out.to_publish:
-            payload = enc(e)
+        payloads = wire.estimates_encoder(self.tracker.layout, self.tracker.model_name)(out.to_publish)
+        for e, payload in zip(out.to_publish, payloads, strict=True):
             pubs.put(e.track_id, payload)
             encoded[e.key] = (e, payload)  # the snapshot reuses the bytes (_refresh_status)
             self.published += 1

@@ -108,6 +108,18 @@ class SeqGaps:
             m, f = self._past.get(sensor_id, (0, 0))
             self._past[sensor_id] = (m + gone.missing, f + gone.filled)
 
+    def add_many(self, sensor_id: str, epochs: list[int], seqs: list[int]) -> None:
+        """add(sensor_id, epoch, seq) for each (epoch, seq) of zip(epochs, seqs), in order; the
+        next seq of a run (the common case: nothing missing, nothing filled) inline."""
+        runs = self._runs.get(sensor_id)
+        for epoch, seq in zip(epochs, seqs, strict=True):
+            run = None if runs is None else runs.get(epoch)
+            if run is not None and seq == run.hi + 1:
+                run.hi = seq
+            else:
+                self.add(sensor_id, epoch, seq)
+                runs = self._runs[sensor_id]
+
     def report(self) -> dict[str, SensorGaps]:
         out = {}
         for s in sorted(self._runs):

@@ -39,6 +39,31 @@ class LatencyTracker:
         if ms > self._max[sensor_id]:
             self._max[sensor_id] = ms
 
+    def add_many(self, sensor_id: str, latencies_ns: list[int]) -> None:
+        """add(sensor_id, x) for each x in order, with the same floats (the sum accumulated in
+        the same order), in one call."""
+        if not latencies_ns:
+            return
+        if sensor_id not in self._ring:
+            self.add(sensor_id, latencies_ns[0])
+            latencies_ns = latencies_ns[1:]
+            if not latencies_ns:
+                return
+        ms = [x * 1e-6 for x in latencies_ns]
+        ring, w, n = self._ring[sensor_id], self.window, self._n[sensor_id]
+        total = self._sum[sensor_id]
+        for v in ms:
+            total += v
+        self._sum[sensor_id] = total
+        top = max(ms)
+        if top > self._max[sensor_id]:
+            self._max[sensor_id] = top
+        k = len(ms)
+        if k > w:  # only the last `window` land in the ring
+            ms, n, k = ms[k - w:], n + k - w, w
+        ring[(np.arange(n, n + k) % w)] = ms
+        self._n[sensor_id] += len(latencies_ns)
+
     def stats(self) -> dict[str, LatencyStats]:
         out = {}
         for s in sorted(self._ring):

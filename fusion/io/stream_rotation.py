@@ -99,6 +99,11 @@ class RotatingStream:
                 self.lost += n - i
                 return
             j, size = i, self._bytes
+            if i == 0:  # the common case at once: no record before the last fills the part
+                costs = [len(r[2]) + len(r[1]) + 16 for r in records]
+                total = sum(costs)
+                if size + total - costs[-1] < self.rotate_bytes:
+                    j, size = n, size + total
             while j < n and size < self.rotate_bytes:
                 size += len(records[j][2]) + len(records[j][1]) + 16
                 j += 1

@@ -67,7 +67,14 @@ class StreamWriter:
 
     def write_many(self, records: Sequence[Record]) -> int:
         """Append records with one write; the bytes written."""
-        blob = b"".join([frame(a, k, p) for a, k, p in records])
+        enc, head, crc = _enc.encode, _FRAME.pack, zlib.crc32
+        parts: list[bytes] = []
+        add = parts.append
+        for a, k, p in records:  # frame(a, k, p) of each, inline
+            body = enc((int(a), k, bytes(p)))
+            add(head(len(body), crc(body)))
+            add(body)
+        blob = b"".join(parts)
         self._f.write(blob)
         self.frames += len(records)
         return len(blob)

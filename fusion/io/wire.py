@@ -1,18 +1,24 @@
-"""Between the wire (fusion.messages) and the tracker: decode to Detections, encode Estimates."""
+"""Between the wire (fusion.messages) and the tracker: decode to Detections, encode Estimates
+(the encoding side lives in fusion.io.wire_out, re-exported here)."""
 
 from __future__ import annotations
 
 import functools
-from collections.abc import Callable
-from dataclasses import asdict
-from typing import Any
+from collections.abc import Iterable
 
-import msgspec
 import numpy as np
 
 from fusion import messages as m
+from fusion.io.wire_out import (  # noqa: F401 (re-exported: wire is the one import for both directions)
+    encode_snapshot,
+    encode_status,
+    estimate_encoder,
+    estimate_message,
+    estimates_encoder,
+    event_message,
+    snapshot_of_encoded,
+)
 from fusion.tracking.detection import ControlInput, Detection
-from fusion.tracking.results import Estimate, TrackEvent
 
 STREAM_SUFFIX = ".fstream"
 
@@ -105,6 +111,40 @@ class Codec:
         """Raises MalformedMessageError or InvalidMessageError (fusion.errors) for bad bytes."""
         return detection_of(m.decode_measurement(payload), arrival_ns)
 
+    def detections(self, samples: Iterable[tuple[int | None, bytes]]) -> list[Detection | None]:
+        """[detection(payload, arrival_ns) for (arrival_ns, payload) in samples], in one loop,
+        with None where `detection` would raise (call it on that payload for the error). The
+        same Detections (the same shared R arrays): the two shapes the shipped sensors send (a
+        2-D radar return with its noise, a 2-D position with per-axis std) are built inline,
+        the rest by detection_of. Each message is dropped once converted (a list of them would
+        outlive the collector's young generation: measured slower than one at a time)."""
+        dec = m.measurement_decoder()
+        out: list[Detection | None] = []
+        add = out.append
+        radar, cart, memo, array, f64 = m.Radar, m.Cartesian, _DIAGONALS, np.array, np.float64
+        for a, p in samples:
+            try:
+                msg = dec(p)
+            except Exception:  # noqa: BLE001 (not swallowed: the caller decodes it alone and gets the error)
+                add(None)
+                continue
+            d = msg.data
+            if type(d) is radar:
+                rs = d.range_std_m
+                if rs is not None and d.elevation_rad is None and d.range_rate_mps is None:
+                    R = memo.get((rs, d.bearing_std_rad))  # type: ignore[arg-type]
+                    if R is not None:
+                        add(Detection(msg.sensor_id, msg.t_ns, msg.seq, array((d.range_m, d.bearing_rad), dtype=f64),
+                                      R, a, msg.epoch, True))
+                        continue
+            elif type(d) is cart and d.cov_m2 is None and d.std_m is not None:
+                R = memo.get(tuple(d.std_m))
+                if R is not None:
+                    add(Detection(msg.sensor_id, msg.t_ns, msg.seq, array(d.pos_m, dtype=f64), R, a, msg.epoch, False))
+                    continue
+            add(detection_of(msg, a))  # the general path (and the first message of each noise)
+        return out
+
     def control(self, payload: bytes, arrival_ns: int | None = None) -> ControlInput:
         msg = m.decode_input(payload)
         return ControlInput(msg.source_id, msg.t_ns, msg.seq, np.array(msg.u, dtype=np.float64), arrival_ns)
@@ -129,93 +169,3 @@ def _tracks_prefix(ns: str) -> str:
 def track_key(ns: str, track_id: int) -> str:
     """fusion.messages.track_key, the namespace's prefix built once."""
     return _tracks_prefix(ns) + str(int(track_id))
-
-
-def estimate_message(e: Estimate, *, layout: tuple[str, ...], model: str) -> m.Estimate:
-    return _estimate(e, list(layout), model)
-
-
-def _estimate(e: Estimate, names: list[str], model: str) -> m.Estimate:
-    """The wire Estimate; `names` (the layout) is shared by the messages of one encoder."""
-    mu = e.mode_probabilities
-    return m.Estimate(
-        track_id=e.track_id, t_ns=e.t_ns, sensor_id=e.sensor_id, seq=e.seq if e.seq > 0 else 0, state=e.x.tolist(),
-        cov=e.P.ravel().tolist(), layout=names if e.x.size else [], model=model,
-        status=e.status,  # type: ignore[arg-type]
-        revision=e.revision, nis=e.nis, mode_probabilities=None if mu is None else mu.tolist(),
-    )
-
-
-def event_message(ev: TrackEvent) -> m.Event:
-    return m.Event(track_id=ev.track_id, t_ns=ev.t_ns, kind=ev.kind.value,  # type: ignore[arg-type]
-                   reason=None if ev.reason is None else ev.reason.value, withdrawn=ev.retracted)
-
-
-def _positional(cls: type[msgspec.Struct]) -> type[msgspec.Struct]:
-    """A struct that encodes exactly as `cls` (same tag, fields in the same order, the same
-    defaults omitted) but is built from positional arguments, 0.4 us cheaper per message than
-    keywords: for encoding only. A field with a default factory (`v`) is a required one here,
-    so it is always given, as the factory's value always is on the wire."""
-    spec: list[Any] = []
-    for f in msgspec.structs.fields(cls):
-        if f.default is msgspec.NODEFAULT:  # required, or a factory
-            spec.append((f.name, Any))
-        else:
-            spec.append((f.name, Any, f.default))
-    cfg = cls.__struct_config__
-    return msgspec.defstruct(f"{cls.__name__}Out", spec, tag=cfg.tag, tag_field=cfg.tag_field, frozen=True,
-                             omit_defaults=cfg.omit_defaults)
-
-
-_EstimateOut = _positional(m.Estimate)
-
-
-def estimate_encoder(layout: tuple[str, ...], model: str) -> Callable[[Estimate], bytes]:
-    """e -> m.encode(estimate_message(e, layout=layout, model=model)), the same bytes, built
-    positionally (_EstimateOut) with the tolist of each array once."""
-    names = list(layout)
-    encode, out, v = m.encode, _EstimateOut, m.SCHEMA_VERSION
-
-    def enc(e: Estimate) -> bytes:
-        mu = e.mode_probabilities
-        x = e.x
-        return encode(out(v, e.track_id, e.t_ns, e.sensor_id, e.seq if e.seq > 0 else 0, x.tolist(),  # type: ignore[arg-type]
-                          e.P.ravel().tolist(), names if x.size else [], model, e.status, e.revision, e.nis,
-                          None if mu is None else mu.tolist()))
-
-    return enc
-
-
-def encode_status(status: dict[str, Any]) -> bytes:
-    c = status["counts"]
-    msg = m.ServiceStatus(
-        uptime_s=status["uptime_s"], counts=m.Counts(**c), tracks=status["tracks"],
-        latency={k: m.LatencyStats(**asdict(v)) for k, v in status["latency"].items()},
-        recording=status["recording"], recording_bytes=status["recording_bytes"], queue_depth=status["queue_depth"],
-        gaps={k: m.SeqGapStats(**v) for k, v in status.get("gaps", {}).items()},
-        zenoh=m.ZenohLink(**status["zenoh"]) if status.get("zenoh") else None,
-        checkpoint=m.CheckpointStatus(**status["checkpoint"]) if status.get("checkpoint") else None,
-        recording_error=status.get("recording_error"),
-    )
-    return m.encode(msg)
-
-
-def encode_snapshot(estimates: list[m.Estimate]) -> bytes:
-    return m.encode(m.Snapshot(estimates=estimates))
-
-
-_SNAPSHOT_HEAD = m.encode(m.Snapshot(estimates=[]))[:-1]  # the map up to the estimates' array header
-
-
-def snapshot_of_encoded(estimates: list[bytes]) -> bytes:
-    """encode_snapshot's bytes from estimates already encoded (m.encode of each m.Estimate):
-    the Snapshot map with the msgpack array header of len(estimates) (fixarray below 16,
-    array16 below 2^16, else array32) and the estimates' bytes joined, with no re-encoding."""
-    n = len(estimates)
-    if n < 16:
-        head = bytes((0x90 | n,))
-    elif n < 1 << 16:
-        head = b"\xdc" + n.to_bytes(2, "big")
-    else:
-        head = b"\xdd" + n.to_bytes(4, "big")
-    return b"".join([_SNAPSHOT_HEAD, head, *estimates])

@@ -102,6 +102,53 @@ class Clocks:
             self._first_arrival = arrival_ns
         self.sources[source].observe(t_ns, arrival_ns)
 
+    def step(self, source: str, t_ns: int, arrival_ns: int | None, future_ns: int) -> tuple[int | None, int | None]:
+        """One detection's time, as the intake judges it: (the reference it is judged against,
+        the watermark after it), having observed it unless it is more than future_ns ahead of
+        the reference (with arrival times; without, it always counts). Exactly
+            arrival None: observe(source, t, None); reference(source, None); watermark(None)
+            else:         ref = reference(source, a); observe(source, t, a) unless t > ref + future_ns;
+                          watermark(a)
+        with the common case (arrival time known, the source's clock settled) done inline."""
+        c = self.sources[source]
+        if arrival_ns is None or not c.settled:
+            if arrival_ns is None:
+                self.observe(source, t_ns, None)
+                ref = self.reference(source, None)
+            else:
+                ref = self.reference(source, arrival_ns)
+                if ref is None or t_ns <= ref + future_ns:
+                    self.observe(source, t_ns, arrival_ns)
+            return ref, self.watermark(arrival_ns)
+        ref = arrival_ns + c.offset  # type: ignore[operator]
+        if t_ns <= ref + future_ns:  # observe(source, t_ns, arrival_ns), inline
+            if self._first_arrival is None:  # (a clock restored from a checkpoint without it)
+                self._first_arrival = arrival_ns
+            o = t_ns - arrival_ns
+            window, srt = c._window, c._sorted
+            if len(window) == window.maxlen:
+                del srt[bisect.bisect_left(srt, window[0])]
+            window.append(o)
+            bisect.insort(srt, o)
+            c.last_arrival_ns = arrival_ns
+            k = len(srt)
+            c.settled = k >= c._rank
+            c.offset = srt[max(k - c._rank, 0)]
+        low: int | None = None  # watermark(arrival_ns), inline
+        idle, first = self.idle_ns, self._first_arrival
+        for c in self.sources.values():
+            last = c.last_arrival_ns
+            if last is None:
+                if first is not None and arrival_ns - first < idle:
+                    return ref, None
+                continue
+            if arrival_ns - last > idle:
+                continue
+            o = c.offset
+            if low is None or o < low:  # type: ignore[operator]
+                low = o
+        return ref, None if low is None else arrival_ns + low
+
     def watermark(self, arrival_ns: int | None) -> int | None:
         """min over active sources of their clocks; None while a source that must be waited
         for has no clock yet."""

@@ -79,38 +79,30 @@ class Intake:
 
     def _window(self, source: str, t_ns: int, seq: int, arrival_ns: int | None, epoch: int = 0) -> Refusal | None:
         """The clocks, the window and the duplicate set (see the module docstring)."""
-        clocks = self.clocks
-        if arrival_ns is None:  # no other clock: the data's own times, k + 1 that agree move it
-            clocks.observe(source, t_ns, None)
-            ref = clocks.reference(source, None)
-        else:  # data judged future do not count towards the clock
-            ref = clocks.reference(source, arrival_ns)
-            if ref is None or t_ns <= ref + self.future_ns:
-                clocks.observe(source, t_ns, arrival_ns)
+        ref, w = self.clocks.step(source, t_ns, arrival_ns, self.future_ns)  # data judged future do not count
         if ref is not None:
             if self.now_ns is None or ref > self.now_ns:
                 self.now_ns = ref
             if t_ns > ref + self.future_ns:
                 return Refusal(source, t_ns, seq, Reason.FUTURE,
                                f"{(t_ns - ref) / 1e9:.3f} s ahead of {source}'s clock")
-        w = clocks.watermark(arrival_ns)
-        if w is not None and (self.horizon_ns is None or w - self.lag_ns > self.horizon_ns):
-            self.horizon_ns = w - self.lag_ns
-        if self.horizon_ns is None:
-            return self._new(source, t_ns, seq, epoch)
-        if t_ns < self.horizon_ns:
-            return Refusal(source, t_ns, seq, Reason.TOO_LATE,
-                           f"{(self.horizon_ns - t_ns) / 1e9:.3f} s before the out-of-order window")
-        if self.committed is not None and (t_ns, source) <= self.committed:
-            return Refusal(source, t_ns, seq, Reason.TOO_LATE,
-                           "before a scan the history committed early (max_lag_scans)")
-        return self._new(source, t_ns, seq, epoch)
-
-    def _new(self, source: str, t_ns: int, seq: int, epoch: int) -> Refusal | None:
-        ident = (source, seq, t_ns, epoch)
-        if ident in self._seen:
+        h = self.horizon_ns
+        if w is not None:
+            w -= self.lag_ns
+            if h is None or w > h:
+                self.horizon_ns = h = w
+        if h is not None:
+            if t_ns < h:
+                return Refusal(source, t_ns, seq, Reason.TOO_LATE,
+                               f"{(h - t_ns) / 1e9:.3f} s before the out-of-order window")
+            if self.committed is not None and (t_ns, source) <= self.committed:
+                return Refusal(source, t_ns, seq, Reason.TOO_LATE,
+                               "before a scan the history committed early (max_lag_scans)")
+        ident = (source, seq, t_ns, epoch)  # _new, inline
+        seen = self._seen
+        if ident in seen:
             return Refusal(source, t_ns, seq, Reason.DUPLICATE, f"seq {seq} of {source} at this time seen before")
-        self._seen.add(ident)
+        seen.add(ident)
         return None
 
     def forget(self, dets: tuple[Detection, ...]) -> None:
@@ -136,18 +128,16 @@ class Intake:
         """The detection as the tracker takes it (R filled in), or why it is refused. An R
         already found valid for this sensor (the same read-only array: fusion.io.wire shares
         one per distinct std) is not checked again: its diagonal is remembered with it."""
-        sid = d.sensor_id
+        sid, t_ns, seq, z, R, _, _, radar_data = d
         info = self._kinds.get(sid)
         if info is None:
             return d, _no(d, Reason.UNKNOWN_SENSOR, f"sensor {sid!r} is not configured")
         sm, radar = info
-        seq = d.seq
-        if not isinstance(d.t_ns, int) or not isinstance(seq, int) or seq < 0:
+        if not isinstance(t_ns, int) or not isinstance(seq, int) or seq < 0:
             return d, _no(d, Reason.INVALID, "t_ns and seq must be integers, seq >= 0")
-        if d.radar_data is not None and d.radar_data != radar:
+        if radar_data is not None and radar_data != radar:
             return d, _no(d, Reason.INVALID, f"sensor {sid} is {'a radar' if radar else 'not a radar'}; "
-                          f"this message carries {'radar' if d.radar_data else 'Cartesian'} data")
-        z = d.z
+                          f"this message carries {'radar' if radar_data else 'Cartesian'} data")
         if z.ndim != 1 or z.shape[0] not in sm.by_dim:
             return d, _no(d, Reason.INVALID, f"z has shape {z.shape}; sensor {sid} takes lengths {sorted(sm.by_dim)}")
         zl = z.tolist()
@@ -157,7 +147,6 @@ class Intake:
         if radar and not zl[0] > 0:
             return d, _no(d, Reason.INVALID, f"range must be > 0, got {zl[0]}")
         m = len(zl)
-        R = d.R
         if R is None:
             R = sm.default_R[m]
             if R is None:
@@ -170,6 +159,12 @@ class Intake:
             return d, _placed(d, radar, sm.ndim, zl, dflt[1])
         known = self._valid_R.get((sid, m))
         if known is not None and known[0] is R:
+            if radar and sm.ndim == 2:  # _placed's common case, inline
+                d2 = known[1]
+                v0, v1 = d2[0], zl[0] * zl[0] * d2[1]
+                lo, hi = (v0, v1) if v0 <= v1 else (v1, v0)
+                if lo > 0.0 and hi < math.inf and hi <= 1e12 * lo:
+                    return d, None
             return d, _placed(d, radar, sm.ndim, zl, known[1])
         if _positive_diagonal(R, m):
             diag = R.diagonal().tolist()
