@@ -42,7 +42,8 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python -m bench")
     p.add_argument("--quick", action="store_true", help="fewer repeats and sizes (~1 minute)")
     p.add_argument("--only", default="e2e,core,tracker,gospa,recording,intake,late",
-                   help="comma-separated: e2e, core, tracker, gospa, recording, intake, late; soak (not in the default)")
+                   help="comma-separated: e2e, core, tracker, gospa, recording, intake, late;"
+                        " soak (not in the default)")
     p.add_argument("--soak-s", type=float, default=600.0, help="duration of the soak (default 600 s)")
     p.add_argument("--json", type=Path, help="also write the figures to this file")
     args = p.parse_args(argv)

@@ -96,7 +96,8 @@ def print_soak(r: dict[str, Any]) -> None:
     print(f"\nsoak: {r['rate']}/s offered ({r['targets']} targets) for {r['duration_s']:.0f} s, recording "
           f"{'on' if r['recording'] else 'off'}; service VmRSS every 10 s (queued: as of the last status refresh)")
     for s in r["samples"]:
-        print(f"  t={s['t_s']:>5.0f} s  rss {s['rss_mb']:8.1f} MB (anon {s['anon_mb']:7.1f}, file {s['file_mb']:6.1f})  "
+        print(f"  t={s['t_s']:>5.0f} s  rss {s['rss_mb']:8.1f} MB "
+              f"(anon {s['anon_mb']:7.1f}, file {s['file_mb']:6.1f})  "
               f"queued {s['queued']}  applied {s['applied']}")
     print(f"RSS start {r['rss_start_mb']:.1f} MB, end {r['rss_end_mb']:.1f} MB, max {r['rss_max_mb']:.1f} MB, "
           f"slope {r['slope_mb_per_min']:+.2f} MB/min, max/min - 1 after the first minute {r['spread_after_1min']:.1%}")

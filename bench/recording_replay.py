@@ -3,7 +3,8 @@ load (shipped configuration, truth of every target at every radar scan) captured
 this tree's RerunSink and to another tree's (e.g. a `git worktree add --detach /tmp/main main`),
 alternating, with the same record-flush cadence (at FLUSH_ROWS pending rows, the sink's own
 threshold, instead of the wall clock: the same flushes for both, ~0.5 s of the bench's run) and
-one view flush at close, as a short run of the bench has. Reported: thread CPU per measurement, median [min, max] over the repeats.
+one view flush at close, as a short run of the bench has. Reported: thread CPU per measurement,
+median [min, max] over the repeats.
 
     python -m bench.recording_replay OTHER_TREE [targets ...] [--repeats N]
 

@@ -196,12 +196,15 @@ class Pipeline:
         # every measurement's payload decoded in one loop (Codec.detections); a None there, and
         # every other kind of sample, goes the one-sample way, so refusals are those of _decode
         try:
-            fast = iter(self.codec.detections((r[0], r[2]) for r, rt in zip(records, routes) if rt[0] == "meas"))
-        except Exception:  # noqa: BLE001 (a decoder bug: each sample then fails alone in _decode, logged)
+            fast = iter(self.codec.detections((r[0], r[2]) for r, rt in zip(records, routes, strict=True)
+                                              if rt[0] == "meas"))
+        except Exception as exc:  # a decoder bug: said, then each sample decoded alone (its errors are _decode's)
+            self.warn.warn("batch_decode", "batch decode failed (%s: %s); decoding the batch's %d samples one by one",
+                           type(exc).__name__, exc, len(records))
             fast = itertools.repeat(None)
         self._received += len(records)
         try:
-            for (arrival_ns, key, payload), (kind, key_id) in zip(records, routes):
+            for (arrival_ns, key, payload), (kind, key_id) in zip(records, routes, strict=True):
                 d = next(fast) if kind == "meas" else None
                 d = decode(arrival_ns, key, payload) if d is None else checked(d, key, key_id, arrival_ns)
                 if d is not None:

@@ -283,6 +283,9 @@ class Service:
                 else:
                     self._wake.wait(0.05)
                     self._wake.clear()
+                    if not self._q and self._settled != self._processed + self._q.refused_total:
+                        self._refresh_status(force=True)  # samples refused at the door since the last batch
+                        self._settled = self._processed + self._q.refused_total
                 self._answer_queries()
                 if self._guard is not None:
                     self._guard.maybe_flush()

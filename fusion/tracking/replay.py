@@ -32,9 +32,9 @@ import numpy as np
 from fusion.core.association import coarse_pairs
 from fusion.core.checks import Array
 from fusion.tracking.detection import Detection
+from fusion.tracking.id_sets import grown, member
 from fusion.tracking.results import Association, EventKind, Outcome, ScanKey
 from fusion.tracking.scan import Coarse, ScanContext, ScanOutcome, Tally, measured_points, run_scan
-from fusion.tracking.id_sets import grown, member
 from fusion.tracking.trackset import TrackSet
 
 

@@ -183,7 +183,7 @@ def _births_and_associations(ts: TrackSet, key: ScanKey, dets: tuple[Detection, 
     room = ctx.max_tracks - len(ts)
     unassigned = refused = 0
     updated = Outcome.UPDATED
-    for j, (d, lo, hi) in enumerate(zip(dets, bounds, bounds[1:])):
+    for j, (d, lo, hi) in enumerate(zip(dets, bounds[:-1], bounds[1:], strict=True)):
         p = taken.get(j)
         if p is not None:
             assoc.append(Association(sensor_id, t_ns, d.seq, updated, gids[p], nis[p], tuple(gids[lo:hi])))
