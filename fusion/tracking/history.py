@@ -116,6 +116,7 @@ def revise(entry: Entry, prev: Entry | None, new: list[Estimate], kept: Abstract
     """The estimates to report for a scan run (again): see the module docstring. `kept`: tracks
     of a partial re-run (fusion.tracking.replay) whose stored estimates stand as they were."""
     old = prev.emitted if prev else {}
+    entry.emitted.update(old)  # every track old holds ends up in entry: produced, standing or retracted
     out: list[Estimate] = []
     produced: set[int] = set()
     for e in new:
@@ -129,8 +130,7 @@ def revise(entry: Entry, prev: Entry | None, new: list[Estimate], kept: Abstract
         entry.emitted[e.track_id] = (rev, sig, True)
         out.append(e.with_revision(rev))
     gone = old.keys() - produced
-    stand = gone & kept if kept else set()  # kept tracks' stored estimates stand (a partial re-run)
-    entry.emitted.update({tid: old[tid] for tid in stand})
+    stand = gone & kept if kept else set()  # kept tracks' stored estimates stand (a partial re-run): as copied
     for tid in sorted(gone - stand):
         rev, sig, alive = old[tid]
         if alive:

@@ -227,11 +227,12 @@ def rerun(ts: TrackSet, key: ScanKey, dets: tuple[Detection, ...], ctx: ScanCont
     in_js[js] = True
     gone_k = np.flatnonzero(in_js[old_j]).tolist()  # the stored detections run again
     A = old.after
-    kept_births = A.ids[~member(A.ids, old.before.ids) & ~member(A.origin_seq, seqs[js])]
+    born_then = ~member(A.ids, old.before.ids)  # the stored run's births
+    kept_births = A.ids[born_then & ~member(A.origin_seq, seqs[js])]
     n_born = kept_births.size + (0 if sub is None else int(sub.tally[Tally.BIRTHS]))
     if n_born > ctx.max_tracks - len(ts):
         return None  # births the whole scan would refuse for capacity: its counts are global
-    after = _assemble(ts, rows, None if sub is None else sub.after, old, seqs[js])
+    after = _assemble(ts, rows, None if sub is None else sub.after, old, seqs[js], born_then)
     touched = np.unique(np.concatenate([ts.ids[rows]] + ([] if sub is None else [sub.after.ids])))
     kept = set(ts.ids.tolist()).union(kept_births.tolist()).difference(touched.tolist())
     # the stored tally less what the re-run part counted in the stored run, plus what it counts now
@@ -270,26 +271,37 @@ def _lookup(ids: np.ndarray, want: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return at, ids[at] == want
 
 
-def _assemble(ts: TrackSet, rows: np.ndarray, sub_after: TrackSet | None, old: Stored, rerun_seqs: np.ndarray
-              ) -> TrackSet:
+def _assemble(ts: TrackSet, rows: np.ndarray, sub_after: TrackSet | None, old: Stored, rerun_seqs: np.ndarray,
+              born_then: np.ndarray) -> TrackSet:
     """The after-set in the whole scan's order: the survivors of ts in ts's order (re-run rows from
     sub_after, the others from old.after: a kept row survives now iff it survived then), then the
-    births by detection seq (those of re-run detections from sub_after, the others' from old.after)."""
+    births by detection seq (those of re-run detections from sub_after, the others' from old.after).
+    Where that is old.after's rows in their order with some rows from sub_after (the usual case:
+    nothing born or deleted differently), old.after's columns are copied with those rows set, and
+    the columns a track's id decides are old.after's own arrays (track sets are immutable).
+    `born_then`: which rows of old.after the stored run started."""
     A = old.after
     rerun = np.zeros(len(ts), dtype=bool)
     rerun[rows] = True
     off = 0 if sub_after is None else len(sub_after)
-    pool = A if sub_after is None else sub_after.joined(A)
-    at_a, in_a = _lookup(A.ids, ts.ids)
+    at_a, in_a = A.rows_of(ts.ids)
     src, ok = off + at_a, in_a & ~rerun
-    born_a = np.flatnonzero(~member(A.ids, old.before.ids) & ~member(A.origin_seq, rerun_seqs))
+    born_a = np.flatnonzero(born_then & ~member(A.origin_seq, rerun_seqs))
     born_idx, born_seq = [off + born_a], [A.origin_seq[born_a]]
     if sub_after is not None:
-        at_s, in_s = _lookup(sub_after.ids, ts.ids)
+        at_s, in_s = sub_after.rows_of(ts.ids)
         src = np.where(rerun, at_s, src)
         ok = np.where(rerun, in_s, ok)
         born_s = np.flatnonzero(~member(sub_after.ids, ts.ids))
         born_idx.append(born_s)
         born_seq.append(sub_after.origin_seq[born_s])
     bi, bs = np.concatenate(born_idx), np.concatenate(born_seq)
-    return pool.take(np.concatenate([src[ok], bi[np.argsort(bs, kind="stable")]]).astype(np.intp))
+    idx = np.concatenate([src[ok], bi[np.argsort(bs, kind="stable")]]).astype(np.intp)
+    if sub_after is None:
+        return A.take(idx - off)
+    fresh = np.flatnonzero(idx < off)  # the rows taken from sub_after
+    from_a = idx >= off
+    if idx.size == len(A) and (idx[from_a] - off == np.flatnonzero(from_a)).all() \
+            and (sub_after.ids[idx[fresh]] == A.ids[fresh]).all():
+        return A.with_rows(fresh, sub_after, idx[fresh])
+    return sub_after.joined(A).take(idx)

@@ -14,6 +14,7 @@ the scan's detections to the new track set and what happened.
 
 from __future__ import annotations
 
+import functools
 from collections import Counter
 from dataclasses import dataclass
 from enum import StrEnum
@@ -36,7 +37,7 @@ from fusion.tracking.results import (
     ScanKey,
     TrackEvent,
 )
-from fusion.tracking.trackset import Rows, Status, TrackSet, track_id_for
+from fusion.tracking.trackset import ROW_FIELDS, Layout, Rows, Status, TrackSet, track_id_for
 
 _LABELS = {int(s): s.label for s in Status}
 
@@ -256,13 +257,23 @@ def _measured_points(sm: SensorModel, meas: Measured) -> tuple[Array, Array]:
     return mpos, mvar
 
 
+@functools.cache
+def _no_rows(layout: Layout) -> Rows:
+    """No rows of `layout` (read-only: one per layout, shared by every scan without births)."""
+    rows = Rows.empty(layout)
+    for f in ROW_FIELDS:
+        if (c := getattr(rows, f)) is not None:
+            c.setflags(write=False)
+    return rows
+
+
 def _born_rows(ts: TrackSet, born: list[Detection], pos: Array, sm: SensorModel, ctx: ScanContext) -> Rows:
     """Single-point initiation: position and its covariance from the measurement, the rest from
     the configured prior (zero mean); an IMM starts with equal mode probabilities."""
     k = len(born)
     L = ts.layout
     if not k:
-        return Rows.empty(L)
+        return _no_rows(L)
     pi = list(ctx.pos_idx)
     X = np.zeros((k, L.n_state))
     X[:, pi] = pos

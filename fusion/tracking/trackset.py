@@ -116,6 +116,8 @@ class Rows:
 
 ROW_FIELDS = tuple(f.name for f in fields(Rows))
 COUNTERS = ("chances", "misses", "seen_by")
+# the columns a track's id decides (it is derived from the measurement that started it)
+BY_ID = ("ids", "birth_t_ns", "origin_sensor", "origin_seq")
 # changed_since compares the columns a scan changes most first (a row found changed is compared no further)
 _COMPARE_ORDER = ("X", "MU", "t_ns", *(f for f in ROW_FIELDS if f not in ("X", "MU", "t_ns")))
 
@@ -123,7 +125,7 @@ _COMPARE_ORDER = ("X", "MU", "t_ns", *(f for f in ROW_FIELDS if f not in ("X", "
 class TrackSet:
     """An immutable set of tracks (see the module docstring): the columns of Rows, and layout."""
 
-    __slots__ = (*ROW_FIELDS, "_index", "_views", "layout")
+    __slots__ = (*ROW_FIELDS, "_index", "_order", "_views", "layout")
     ids: np.ndarray
     status: np.ndarray
     hits: np.ndarray
@@ -150,6 +152,7 @@ class TrackSet:
             setattr(self, f, cols[f])
         self.layout = layout
         self._index: dict[int, int] | None = None
+        self._order: np.ndarray | None = None
         self._views: tuple[Track, ...] | None = None
 
     @classmethod
@@ -170,6 +173,17 @@ class TrackSet:
         if self._index is None:
             self._index = {int(t): i for i, t in enumerate(self.ids.tolist())}
         return self._index.get(track_id)
+
+    def rows_of(self, ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(row of each of `ids`, found): found[k] iff the set holds a track ids[k], and then
+        row[k] is its row (by binary search over the ids' order, sorted once per set)."""
+        n = len(self)
+        if n == 0:
+            return np.zeros(ids.size, dtype=np.intp), np.zeros(ids.size, dtype=bool)
+        if self._order is None:
+            self._order = np.argsort(self.ids, kind="stable")
+        at = self._order[np.minimum(np.searchsorted(self.ids, ids, sorter=self._order), n - 1)]
+        return at, self.ids[at] == ids
 
     def state(self, i: int) -> GaussianState | IMMState:
         t = int(self.t_ns[i])
@@ -209,6 +223,18 @@ class TrackSet:
         """The rows `idx` (indices, in that order) as a set of their own."""
         return TrackSet._of({f: None if (c := getattr(self, f)) is None else c[idx] for f in ROW_FIELDS}, self.layout)
 
+    def with_rows(self, at: np.ndarray, other: TrackSet, src: np.ndarray) -> TrackSet:
+        """This set with its rows `at` replaced by `other`'s rows `src`, rows of the same tracks
+        (so the columns a track's id decides are this set's own arrays)."""
+        cols = {}
+        for f in ROW_FIELDS:
+            c = getattr(self, f)
+            if c is not None and f not in BY_ID:
+                c = c.copy()
+                c[at] = getattr(other, f)[src]
+            cols[f] = c
+        return TrackSet._of(cols, self.layout)
+
     def joined(self, other: TrackSet) -> TrackSet:
         """This set's rows, then `other`'s (of the same layout)."""
         return TrackSet._of({f: None if (c := getattr(self, f)) is None else np.concatenate([c, getattr(other, f)])
@@ -229,9 +255,7 @@ class TrackSet:
         if among is None and self.ids.shape == old.ids.shape and np.array_equal(self.ids, old.ids):
             at, found = rows, np.ones(n, dtype=bool)
         else:
-            order = np.argsort(old.ids, kind="stable")
-            at = order[np.minimum(np.searchsorted(old.ids, self.ids[rows], sorter=order), len(old) - 1)]
-            found = old.ids[at] == self.ids[rows]
+            at, found = old.rows_of(self.ids[rows])
         same = found.copy()
         for f in _COMPARE_ORDER:
             a = getattr(self, f)
