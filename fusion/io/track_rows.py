@@ -8,7 +8,6 @@ per view flush, however many record flushes came before it."""
 from __future__ import annotations
 
 from collections import defaultdict
-from operator import attrgetter
 from typing import Any
 
 import numpy as np
@@ -23,7 +22,6 @@ from fusion.tracking.results import Estimate
 
 OSPA_EVERY_NS = 1_000_000_000  # OSPA / GOSPA at most once per second of sensor time
 OSPA_MAX_POINTS = 300  # and for scenes of at most this many tracks and targets (the assignment is cubic)
-_SCORED = attrgetter("track_id", "sensor_id", "seq", "status", "revision", "nis", "x", "P", "y")
 MAX_VIEWED = 6  # tracks with views of their own: the first confirmed ones
 TRUTH_KEPT = 100_000  # truth times kept for scoring (the oldest half dropped past this)
 # measurements in the position panels: the role's colour, translucent and small. Rerun draws a
@@ -106,10 +104,8 @@ class Rows:
             t, arr, step = t[~ret], arr[~ret], step[~ret]
         else:
             E_ = E
-        ids, sensors, seqs, status, revisions, niss, xs, Ps, ys = (
-            list(c) for c in zip(*map(_SCORED, E_), strict=True))  # one pass over the estimates
-        X = stack(xs)
-        P = stack(Ps)
+        X = stack([e.x for e in E_])
+        P = stack([e.P for e in E_])
         std = np.sqrt(np.clip(np.diagonal(P, axis1=1, axis2=2), 0.0, None))
         n = len(E_)
         m_idx, TX, targets = derive.match_truth(t, X, P, self.truth, self.pi)
@@ -123,10 +119,12 @@ class Rows:
             target[i] = name
         matched = np.zeros(n, dtype=bool)
         matched[m_idx] = True
-        nis = np.array([np.nan if v is None else v for v in niss], dtype=np.float64)
-        nis_dof = np.array([0 if y is None else y.shape[0] for y in ys], dtype=np.int64)
-        rec.extend(t, step, arr, track=ids, label=list(map(short_id, ids)), sensor=sensors,
-                   seq=seqs, status=status, revision=revisions,
+        nis = np.array([np.nan if e.nis is None else e.nis for e in E_], dtype=np.float64)
+        nis_dof = np.array([0 if e.y is None else e.y.shape[0] for e in E_], dtype=np.int64)
+        ids = [e.track_id for e in E_]
+        status = [e.status for e in E_]
+        rec.extend(t, step, arr, track=ids, label=[short_id(i) for i in ids], sensor=[e.sensor_id for e in E_],
+                   seq=[e.seq for e in E_], status=status, revision=[e.revision for e in E_],
                    blocks={"x": X, "std": std, "error": err}, nis=nis, nis_dof=nis_dof,
                    nees=nees, nees_dof=np.where(matched, len(self.ki), 0), target=target)
         W = derive.world(X[:, self.pi])
