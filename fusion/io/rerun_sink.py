@@ -122,7 +122,8 @@ class RerunSink:
         # each sensor's measured components as (name, unit), to split the gain by unit (meta
         # "measured", fusion.io.gain_groups.measured_components; else one unsplit gain view)
         self.measured: dict[str, list[list[list[str]]]] = dict((meta or {}).get("measured", {}))
-        self._send_blueprint()
+        # the layout is first sent with the first rows written (or at close): one blueprint less per
+        # file (~20 ms of rerun's blueprint building each); a file with no rows has nothing to lay out
 
     # ---- continuity across files -----------------------------------------------------------------
     def continue_from(self, previous: RerunSink) -> None:
@@ -260,13 +261,13 @@ class RerunSink:
                 t_est, arr_e, stp_e = t_est[~wait], arr_e[~wait], stp_e[~wait]
         truth, self._truth_rows = self._truth_rows, []
         if truth:
-            t_t = [r[0] for r in truth]
-            S = stack([r[2] for r in truth])  # the states as logged: float64 (Rows.add_truth)
-            self.col("record/truth", "record").extend(t_t, [r[1] for r in truth], t_t, blocks={"x": S},
-                                                      target=[r[3] for r in truth])  # float64: for inspect
+            t_t, step_t, states, targets = (list(c) for c in zip(*truth, strict=True))  # one pass
+            S = stack(states)  # the states as logged: float64 (Rows.add_truth)
+            self.col("record/truth", "record").extend(t_t, step_t, t_t, blocks={"x": S},
+                                                      target=targets)  # float64: for inspect
             W = world(S[:, self.rows.pi])
             self.col("world/truth", "points", rgba=colour("truth"), radius=-1.5).extend(
-                t_t, [r[1] for r in truth], t_t, p=W[:, None, :])
+                t_t, step_t, t_t, p=W[:, None, :])
         scored = self.rows.score(E, t_est, arr_e, stp_e, self)
         if scored is not None:
             self._scored.append(scored)

@@ -10,7 +10,6 @@ from __future__ import annotations
 from collections import defaultdict
 from typing import Any
 
-import msgspec
 import numpy as np
 
 from fusion.core.checks import Array
@@ -18,7 +17,7 @@ from fusion.io import derive, gain_groups, trail
 from fusion.io.columns import stack
 from fusion.io.labels import short_id
 from fusion.io.palette import colour, series_colours
-from fusion.io.view_rows import Fields, Stacked
+from fusion.io.view_rows import Stacked
 from fusion.tracking.results import Estimate
 
 OSPA_EVERY_NS = 1_000_000_000  # OSPA / GOSPA at most once per second of sensor time
@@ -148,9 +147,9 @@ class Rows:
         sel = np.array([i for i, tid in enumerate(ids) if tid in viewed and conf[i]], dtype=np.int64)
         if not sel.size:
             return None
-        return Stacked(t[sel], step[sel], arr[sel], X[sel], P[sel], std[sel], err[sel], matched[sel], nees[sel],
-                        TX_full(TX, m_idx, X.shape)[sel], W[sel], f=Fields.of([owned(E_[i]) for i in sel.tolist()]),
-                        ids=[ids[i] for i in sel.tolist()], conf=conf[sel])
+        return Stacked.of([E_[i] for i in sel.tolist()], t[sel], step[sel], arr[sel], X[sel], P[sel], std[sel],
+                          err[sel], matched[sel], nees[sel], TX_full(TX, m_idx, X.shape)[sel], W[sel], conf=conf[sel],
+                          n_pos=len(self.pi))
 
     def views(self, batches: list[Stacked], sink: Any) -> None:
         """The viewed tracks' time series and cursor marks, from their rows of the record flushes
@@ -158,11 +157,9 @@ class Rows:
         if not batches:
             return
         c = batches[0] if len(batches) == 1 else Stacked.concat(batches)
-        rows_of: dict[int, list[int]] = defaultdict(list)
-        for i, tid in enumerate(c.ids):
-            rows_of[tid].append(i)
-        for tid in sorted(rows_of, key=list(self.viewed).index):
-            self._track(sink, tid, np.array(rows_of[tid]), c.f.take(rows_of[tid]), c)
+        present = set(c.ids.tolist())
+        for tid in [tid for tid in self.viewed if tid in present]:  # in order of confirmation
+            self._track(sink, tid, np.flatnonzero(c.ids == tid), c)
 
     def _set_distances(self, sink: Any, t: Array, step: Array, arr: Array, W: Array, conf: Array,
                        ids: list[int]) -> None:
@@ -183,16 +180,15 @@ class Rows:
                          colors=[colour("nees" if name == "ospa" else "nis")]).add(
                     int(t[i0]), int(step[i0]), int(arr[i0]), v=[v])
 
-    def _track(self, sink: Any, tid: int, rows: Array, f: Fields, c: Stacked) -> None:
-        """The time series and cursor entities of one viewed track."""
+    def _track(self, sink: Any, tid: int, rows: Array, c: Stacked) -> None:
+        """The time series and cursor entities of one viewed track (its `rows` of `c`)."""
         lab = self.viewed[tid]
         base = f"tracks/{lab}"
         t, step, arr = c.t[rows], c.step[rows], c.arr[rows]
-        prior = stack([c.X[r] if px is None else px for r, px in zip(rows.tolist(), f.prior_x, strict=True)])
+        prior = c.prior[rows]
         mt = c.matched[rows]
-        mps = f.meas_pos
-        meas = [k for k, mp in enumerate(mps) if mp is not None]
-        meas_pos = stack([mps[k][: len(self.pi)] for k in meas])
+        meas = c.meas[rows]
+        meas_pos = c.meas_pos[rows][meas]
         for a, i in enumerate(self.pi):
             ax = self.axes[a]
             # the prediction first: a plot draws its series in order, the estimate goes on top
@@ -208,7 +204,7 @@ class Rows:
                 sink.col(f"{base}/error/{ax}", "scalars", width=3, names=["error", "+2 sigma", "-2 sigma"],
                          colors=[colour("estimate"), colour("bound"), colour("bound")]).extend(
                     t[mt], step[mt], arr[mt], v=np.column_stack([e_, s_, -s_]))
-            if meas:
+            if meas.any():
                 sink.col(f"{base}/position/{ax}/measurement", "scalars", width=1, names=["associated measurement"],
                          colors=[_MEAS_UNDER_LINE], points=True, marker_size=0.75).extend(
                     t[meas], step[meas], arr[meas], v=meas_pos[:, a:a + 1])
@@ -221,42 +217,34 @@ class Rows:
         d = len(self.layout)
         sink.col(f"{base}/std", "scalars", width=d, names=[f"sigma {x}" for x in self.layout],
                  colors=series_colours(d)).extend(t, step, arr, v=c.std[rows])
-        self._update_parts(sink, base, f, t, step, arr)
+        self._update_parts(sink, base, tid, c)
         self._cursor(sink, tid, lab, rows, c)
 
-    def _update_parts(self, sink: Any, base: str, f: Fields, t: Array, step: Array, arr: Array) -> None:
+    def _update_parts(self, sink: Any, base: str, tid: int, c: Stacked) -> None:
         """NIS with its bounds, innovation with +-2 sqrt(diag S) and Kalman gain, per sensor
-        (stacked: one batched solve per sensor), and IMM mode probabilities."""
+        (stacked: one batched solve per sensor), and IMM mode probabilities, of track `tid`."""
         d = len(self.layout)
-        by_sensor: dict[str, list[int]] = defaultdict(list)
-        ys, Ss, niss, Hs, Pms = f.y, f.S, f.nis, f.H, f.prior_P
-        for k, (y, S_, v, sensor) in enumerate(zip(ys, Ss, niss, f.sensor_id, strict=True)):
-            if y is not None and S_ is not None and v is not None:
-                by_sensor[sensor].append(k)
-        for sensor, ks in sorted(by_sensor.items()):
-            sel = np.array(ks)
-            Y = stack([ys[k] for k in ks])
-            S = stack([Ss[k] for k in ks])
+        for sensor, u in sorted(c.updates.items()):
+            g = np.flatnonzero(c.ids[u.rows] == tid)  # the track's rows of this sensor, in order
+            if not g.size:
+                continue
+            r = u.rows[g]
+            t, step, arr = c.t[r], c.step[r], c.arr[r]
+            Y, S, nis = u.Y[g], u.S[g], u.nis[g]
             m = Y.shape[1]
             lo, hi = derive.chi2_bounds(m)
-            nis = np.array([niss[k] for k in ks], dtype=np.float64)
             sink.col(f"{base}/nis", "scalars", width=3, names=[f"NIS (m={m})", "2.5 %", "97.5 %"],
                      colors=[colour("nis"), colour("bound"), colour("bound")]).extend(
-                t[sel], step[sel], arr[sel], v=np.column_stack([nis, np.full_like(nis, lo), np.full_like(nis, hi)]))
+                t, step, arr, v=np.column_stack([nis, np.full_like(nis, lo), np.full_like(nis, hi)]))
             s2 = 2.0 * np.sqrt(np.clip(np.diagonal(S, axis1=1, axis2=2), 0.0, None))
             names = [f"y{j}" for j in range(m)] + [f"+2 sqrt S{j}{j}" for j in range(m)] + \
                     [f"-2 sqrt S{j}{j}" for j in range(m)]
             sink.col(f"{base}/innovation/{sensor}", "scalars", width=3 * m, names=names,
                      colors=series_colours(m) + [colour("bound")] * 2 * m).extend(
-                t[sel], step[sel], arr[sel], v=np.concatenate([Y, s2, -s2], axis=1))
-            has_k = np.fromiter((Hs[k] is not None and Pms[k] is not None for k in ks), dtype=bool,
-                                count=len(ks))
+                t, step, arr, v=np.concatenate([Y, s2, -s2], axis=1))
+            has_k = u.gain[g]
             if has_k.any():
-                kg = [k for k, h in zip(ks, has_k.tolist(), strict=True) if h]
-                gs = sel[has_k]
-                H = stack([Hs[k] for k in kg])
-                Pm = stack([Pms[k] for k in kg])
-                Sg = S[has_k]  # the same S, already stacked
+                H, Pm, Sg = u.H[g][has_k], u.Pm[g][has_k], S[has_k]
                 K = np.swapaxes(np.linalg.solve(Sg, H @ Pm), 1, 2)  # P- H' S^-1, S symmetric
                 # one scale per unit; a sink without the description (bench/recording_cost.py loads
                 # main's sink beside this module) gets the unsplit gain
@@ -264,16 +252,16 @@ class Rows:
                 for group, cols, comp in gain_groups.split(measured, sensor, m):
                     w = d * len(cols)
                     sink.col(f"{base}/gain/{group}/{sensor}", "scalars", width=w,
-                             names=[f"K[{x},{c}]" for x in self.layout for c in comp],
-                             colors=series_colours(w)).extend(t[gs], step[gs], arr[gs],
-                                                              v=K[:, :, cols].reshape(len(kg), -1))
-        mus = f.mode_probabilities
-        mk = [k for k, m in enumerate(mus) if m is not None]
-        if mk:
-            mu = stack([mus[k] for k in mk])
-            sel = np.array(mk)
-            sink.col(f"{base}/mode", "scalars", width=mu.shape[1], names=_mode_names(sink.mode_names, mu.shape[1]),
-                     colors=series_colours(mu.shape[1])).extend(t[sel], step[sel], arr[sel], v=mu)
+                             names=[f"K[{x},{c_}]" for x in self.layout for c_ in comp],
+                             colors=series_colours(w)).extend(t[has_k], step[has_k], arr[has_k],
+                                                              v=K[:, :, cols].reshape(len(K), -1))
+        if c.mu is not None:
+            rows = np.flatnonzero((c.ids == tid) & c.mode)
+            if rows.size:
+                mu = c.mu[rows]
+                sink.col(f"{base}/mode", "scalars", width=mu.shape[1],
+                         names=_mode_names(sink.mode_names, mu.shape[1]), colors=series_colours(mu.shape[1])).extend(
+                    c.t[rows], c.step[rows], c.arr[rows], v=mu)
 
     def _cursor(self, sink: Any, tid: int, lab: str, rows: Array, c: Stacked) -> None:
         """Labelled point and 2-sigma ellipse at the cursor, the faint trail of earlier ellipses
@@ -317,16 +305,6 @@ class Rows:
             lab = self.viewed[tid]
             sink.col(f"world/tracks/{lab}/end", "points", rgba=colour("end"), radius=-6.0).add(
                 t, step, arr, p=w[None, :])
-
-
-def owned(e: Estimate) -> Estimate:
-    """`e` with arrays of its own. A step's estimates are rows of its stacked arrays (x, P, y, S,
-    H, ... of every track it updated), so a kept estimate keeps the whole step's arrays alive: the
-    viewed tracks' estimates, kept until the next view flush (15 s), held 55-90 MB of steps' arrays
-    at 667 tracks and 10k measurements/s (the service's 100 MB saw-tooth). Same values."""
-    views = {f: np.array(v) for f in e.__struct_fields__
-             if isinstance(v := getattr(e, f), np.ndarray) and v.base is not None}
-    return msgspec.structs.replace(e, **views) if views else e
 
 
 def TX_full(TX: Array, idx: Array, shape: tuple[int, ...]) -> Array:

@@ -1,75 +1,124 @@
 """The viewed tracks' rows between a record flush and the view flush that draws them
-(fusion.io.track_rows: `Rows.score` makes them, `Rows.views` reads them): their stacked arrays
-(`Stacked`) and what the views read of their estimates (`Fields`: prior, measured position,
-innovation and its covariance, NIS, sensor, Jacobian, prior covariance, mode probabilities),
-read in one pass over the estimates when they are scored, one list per field. What is kept is
-bounded by the viewed tracks' rows, not by the number of tracks."""
+(fusion.io.track_rows: `Rows.score` makes them, `Rows.views` reads them), as stacked arrays of
+their own: the scored rows (times, x, P, sqrt(diag P), error, NEES, matched truth, world
+position) and what the views read of the estimates, stacked when the rows are scored, in one
+pass over the estimates:
+
+- `prior` (n, d): the prediction (x itself where there is none: a birth);
+- `meas` (n,) and `meas_pos` (n, k): whether a measured position is known, and its first k
+  components (NaN where none);
+- `mode` (n,) and `mu` (n, modes): the IMM mode probabilities, where known (None if no row has any);
+- `updates`: per sensor, its rows with an innovation (`Updates`).
+
+Every array is a new one: a step's estimates are rows of its stacked arrays (x, P, y, S, H of
+every track it updated), so keeping an estimate, or a view of its arrays, kept the whole step's
+arrays alive until the view flush (the service's 100 MB saw-tooth). What is kept is bounded by
+the viewed tracks' rows, not by the number of tracks."""
 
 from __future__ import annotations
 
 from operator import attrgetter
-from typing import Any
 
 import numpy as np
 
 from fusion.core.checks import Array
+from fusion.io.columns import stack
 from fusion.tracking.results import Estimate
 
-_FIELDS = ("prior_x", "meas_pos", "y", "S", "nis", "sensor_id", "H", "prior_P", "mode_probabilities")
-_READ_FIELDS = attrgetter(*_FIELDS)
+_READ = attrgetter("prior_x", "meas_pos", "y", "S", "nis", "sensor_id", "H", "prior_P", "mode_probabilities")
 
 
-class Fields:
-    """What the views read of the viewed rows' estimates, one list per field (_FIELDS), read in
-    one pass at the record flush that scores them (an estimate is read while it is still in the
-    cache, not again a view interval later, once per field)."""
+class Updates:
+    """One sensor's rows with an innovation: `rows` (indices into the Stacked), innovation `Y`
+    (k, m), its covariance `S` (k, m, m), `nis` (k,), and where the gain is known (`gain` (k,)),
+    the Jacobian `H` (k, m, d) and prior covariance `Pm` (k, d, d) (NaN elsewhere)."""
 
-    __slots__ = _FIELDS
-    prior_x: list[Array | None]
-    meas_pos: list[Array | None]
-    y: list[Array | None]
-    S: list[Array | None]
-    nis: list[float | None]
-    sensor_id: list[str]
-    H: list[Array | None]
-    prior_P: list[Array | None]
-    mode_probabilities: list[Array | None]
+    __slots__ = ("H", "Pm", "S", "Y", "gain", "nis", "rows")
 
-    def __init__(self, cols: list[list[Any]]) -> None:
-        for name, col in zip(_FIELDS, cols, strict=True):
-            setattr(self, name, col)
+    def __init__(self, rows: Array, Y: Array, S: Array, nis: Array, gain: Array, H: Array, Pm: Array) -> None:
+        self.rows, self.Y, self.S, self.nis, self.gain, self.H, self.Pm = rows, Y, S, nis, gain, H, Pm
 
     @classmethod
-    def of(cls, estimates: list[Estimate]) -> Fields:
-        cols = list(zip(*map(_READ_FIELDS, estimates), strict=True))
-        return cls([list(col) for col in cols] if cols else [[] for _ in _FIELDS])
+    def concat(cls, parts: list[tuple[int, Updates]]) -> Updates:
+        """Parts with the row offset of their Stacked in the concatenation."""
+        rows = np.concatenate([u.rows + off for off, u in parts])
+        return cls(rows, *(np.concatenate([getattr(u, f) for _, u in parts])
+                           for f in ("Y", "S", "nis", "gain", "H", "Pm")))
 
-    def take(self, rows: list[int]) -> Fields:
-        """The fields of some rows, in the order given."""
-        return Fields([[col[i] for i in rows] for col in (getattr(self, n) for n in _FIELDS)])
 
-    @classmethod
-    def concat(cls, parts: list[Fields]) -> Fields:
-        return cls([[x for p in parts for x in getattr(p, n)] for n in _FIELDS])
+def _filled(n: int, present: Array, values: list[Array], shape: tuple[int, ...]) -> Array:
+    """(n, *shape) NaN, with the stacked `values` at the rows where `present`."""
+    out = np.full((n, *shape), np.nan)
+    if values:
+        out[present] = stack(values)
+    return out
 
 
 class Stacked:
-    """The stacked arrays of the viewed tracks' rows of one record flush (or of several,
-    concatenated), with what the views read of their estimates (f), their track ids and whether
-    each is confirmed."""
+    """The viewed tracks' rows of one record flush (or of several, concatenated): see the module
+    docstring. `ids` (n,) int64 track ids; `conf` (n,) whether each is confirmed."""
 
-    __slots__ = ("P", "TX", "W", "X", "arr", "conf", "err", "f", "ids", "matched", "nees", "std", "step", "t")
+    __slots__ = ("P", "TX", "W", "X", "arr", "conf", "err", "ids", "matched", "meas", "meas_pos", "mode", "mu",
+                 "nees", "prior", "std", "step", "t", "updates")
 
     def __init__(self, t: Array, step: Array, arr: Array, X: Array, P: Array, std: Array, err: Array,
-                 matched: Array, nees: Array, TX: Array, W: Array, *, f: Fields, ids: list[int],
-                 conf: Array) -> None:
+                 matched: Array, nees: Array, TX: Array, W: Array, *, ids: Array, conf: Array, prior: Array,
+                 meas: Array, meas_pos: Array, mode: Array, mu: Array | None, updates: dict[str, Updates]) -> None:
         self.t, self.step, self.arr, self.X, self.P, self.std = t, step, arr, X, P, std
         self.err, self.matched, self.nees, self.TX, self.W = err, matched, nees, TX, W
-        self.f, self.ids, self.conf = f, ids, conf
+        self.ids, self.conf, self.prior, self.meas, self.meas_pos = ids, conf, prior, meas, meas_pos
+        self.mode, self.mu, self.updates = mode, mu, updates
+
+    @classmethod
+    def of(cls, estimates: list[Estimate], t: Array, step: Array, arr: Array, X: Array, P: Array, std: Array,
+           err: Array, matched: Array, nees: Array, TX: Array, W: Array, *, conf: Array, n_pos: int) -> Stacked:
+        """The rows of `estimates` (the arrays' rows, in their order; every array a copy of its
+        own), with the first `n_pos` components of their measured positions."""
+        n, d = X.shape
+        priors, mps, ys, Ss, niss, sensors, Hs, Pms, mus = (zip(*map(_READ, estimates), strict=True) if n
+                                                            else ((),) * 9)
+        has_prior = np.fromiter((p is not None for p in priors), dtype=bool, count=n)
+        prior = X.copy()
+        if has_prior.any():
+            prior[has_prior] = stack([p for p in priors if p is not None])
+        meas = np.fromiter((p is not None for p in mps), dtype=bool, count=n)
+        meas_pos = _filled(n, meas, [p[:n_pos] for p in mps if p is not None], (n_pos,))
+        mode = np.fromiter((p is not None for p in mus), dtype=bool, count=n)
+        mu = None
+        if mode.any():
+            present = [p for p in mus if p is not None]
+            mu = _filled(n, mode, present, np.shape(present[0]))
+        by_sensor: dict[str, list[int]] = {}
+        for k, (y, S_, v, sensor) in enumerate(zip(ys, Ss, niss, sensors, strict=True)):
+            if y is not None and S_ is not None and v is not None:
+                by_sensor.setdefault(sensor, []).append(k)
+        updates = {}
+        for sensor, ks in by_sensor.items():
+            Y = stack([ys[k] for k in ks])
+            m = Y.shape[1]
+            gain = np.fromiter((Hs[k] is not None and Pms[k] is not None for k in ks), dtype=bool, count=len(ks))
+            kg = [k for k, g in zip(ks, gain.tolist(), strict=True) if g]
+            updates[sensor] = Updates(np.array(ks, dtype=np.int64), Y, stack([Ss[k] for k in ks]),
+                                      np.array([niss[k] for k in ks], dtype=np.float64), gain,
+                                      _filled(len(ks), gain, [Hs[k] for k in kg], (m, d)),
+                                      _filled(len(ks), gain, [Pms[k] for k in kg], (d, d)))
+        ids = np.fromiter((e.track_id for e in estimates), dtype=np.int64, count=n)
+        return cls(t, step, arr, X, P, std, err, matched, nees, TX, W, ids=ids, conf=conf, prior=prior, meas=meas,
+                   meas_pos=meas_pos, mode=mode, mu=mu, updates=updates)
 
     @classmethod
     def concat(cls, parts: list[Stacked]) -> Stacked:
         arrays = [np.concatenate([getattr(p, f) for p in parts]) for f in
                   ("t", "step", "arr", "X", "P", "std", "err", "matched", "nees", "TX", "W")]
-        return cls(*arrays, f=Fields.concat([p.f for p in parts]), ids=[i for p in parts for i in p.ids],
-                   conf=np.concatenate([p.conf for p in parts]))
+        offsets = np.cumsum([0] + [len(p.t) for p in parts]).tolist()
+        with_mu = [p.mu for p in parts if p.mu is not None]
+        mu = None
+        if with_mu:
+            k = with_mu[0].shape[1]
+            mu = np.concatenate([np.full((len(p.t), k), np.nan) if p.mu is None else p.mu for p in parts])
+        updates = {s: Updates.concat([(off, p.updates[s]) for off, p in zip(offsets, parts, strict=False)
+                                      if s in p.updates])
+                   for s in sorted({s for p in parts for s in p.updates})}
+        cat = {f: np.concatenate([getattr(p, f) for p in parts]) for f in ("ids", "conf", "prior", "meas", "meas_pos",
+                                                                            "mode")}
+        return cls(*arrays, mu=mu, updates=updates, **cat)

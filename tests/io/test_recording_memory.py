@@ -15,7 +15,7 @@ from rerun.chunk import RrdReader
 
 from fusion.config import CartesianSensorConfig, LifecycleConfig, MotionConfig, TrackerConfig
 from fusion.io.rerun_sink import RerunSink
-from fusion.io.track_rows import owned
+from fusion.io.view_rows import Stacked
 from fusion.tracking.detection import Detection
 from fusion.tracking.tracker import Tracker
 
@@ -50,20 +50,30 @@ def _stacked_arrays(e) -> list[weakref.ref]:
             if isinstance(a, np.ndarray) and a.base is not None]
 
 
-def test_owned_copies_views_and_keeps_values() -> None:
+def test_viewed_rows_are_arrays_of_their_own_with_the_same_values() -> None:
+    """Stacked.of (what the sink keeps of the viewed rows until the view flush) shares no memory
+    with the estimates' arrays (rows of their steps' stacked arrays) and holds their values."""
     tracker = _tracker()
     E = [e for dets in _scans() for e in tracker.process(dets).estimates]
     updated = [e for e in E if e.y is not None]
     assert updated and all(e.P.base is not None for e in updated), "the tracker's estimates are no views: no test"
+    X, P = np.stack([e.x for e in updated]), np.stack([e.P for e in updated])
+    n = len(X)
+    s = Stacked.of(updated, np.zeros(n, np.int64), np.zeros(n, np.int64), np.zeros(n, np.int64), X, P, X, X,
+                   np.zeros(n, bool), np.zeros(n), X, X, conf=np.ones(n, bool), n_pos=2)
+    kept = [s.prior, s.meas_pos] + [a for u in s.updates.values() for a in (u.Y, u.S, u.H, u.Pm)]
     for e in updated:
-        o = owned(e)
         for f in e.__struct_fields__:
-            a, b = getattr(e, f), getattr(o, f)
+            a = getattr(e, f)
             if isinstance(a, np.ndarray):
-                assert b.base is None and b.dtype == a.dtype and np.array_equal(a, b, equal_nan=True)
-            else:
-                assert a == b
-        assert owned(o) is o  # nothing left to copy
+                assert not any(np.shares_memory(a, k) for k in kept), f
+    u = s.updates["pos"]
+    assert np.array_equal(s.prior, np.stack([e.prior_x for e in updated]))
+    assert np.array_equal(s.meas_pos, np.stack([e.meas_pos[:2] for e in updated]))
+    assert np.array_equal(u.Y, np.stack([e.y for e in updated]))
+    assert np.array_equal(u.S, np.stack([e.S for e in updated]))
+    assert np.array_equal(u.H, np.stack([e.H for e in updated]))
+    assert np.array_equal(u.Pm, np.stack([e.prior_P for e in updated]))
 
 
 def test_viewed_rows_do_not_keep_the_steps_arrays(tmp_path: Path) -> None:

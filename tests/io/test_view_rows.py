@@ -1,14 +1,13 @@
-"""fusion.io.view_rows.Fields: what the views read of the viewed estimates, read once, is each
-estimate's own field, row for row, through take and concat."""
+"""fusion.io.view_rows.Stacked: what the views read of the viewed estimates, stacked once when
+they are scored, is each estimate's own field, row for row (the prediction x where there is none,
+NaN where a field is absent), per sensor for the innovation, through concat too."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from fusion.io.view_rows import Fields
+from fusion.io.view_rows import Stacked
 from fusion.tracking.results import Estimate
-
-_NAMES = ("prior_x", "meas_pos", "y", "S", "nis", "sensor_id", "H", "prior_P", "mode_probabilities")
 
 
 def _estimates(n: int, seed: int) -> list[Estimate]:
@@ -19,24 +18,44 @@ def _estimates(n: int, seed: int) -> list[Estimate]:
         out.append(Estimate(k, 10 * k, "radar1" if k % 2 else "cam1", k, rng.normal(size=5), np.eye(5), "confirmed", 0,
                             None if born else float(rng.random()), None if born else rng.normal(size=2),
                             None if born else np.eye(2), None if k % 3 else rng.random(2),
-                            None if born else rng.normal(size=2), None if born else rng.normal(size=5),
-                            None if born else np.eye(5), None if born else rng.normal(size=(2, 5))))
+                            None if born else rng.normal(size=3), None if born else rng.normal(size=5),
+                            None if born else np.eye(5), None if born or k % 5 == 1 else rng.normal(size=(2, 5))))
     return out
 
 
-def _same(f: Fields, es: list[Estimate]) -> None:
-    for name in _NAMES:
-        got = getattr(f, name)
-        assert len(got) == len(es)
-        for g, e in zip(got, es, strict=True):
-            assert g is getattr(e, name)  # the estimate's own object, not a copy
+def _of(es: list[Estimate]) -> Stacked:
+    n = len(es)
+    X = np.stack([e.x for e in es])
+    z = np.zeros(n, dtype=np.int64)
+    return Stacked.of(es, z, z, z, X, np.stack([e.P for e in es]), X, X, np.zeros(n, bool), np.zeros(n), X, X,
+                      conf=np.ones(n, bool), n_pos=2)
 
 
-def test_fields_of_take_concat() -> None:
+def _same(s: Stacked, es: list[Estimate]) -> None:
+    assert s.ids.tolist() == [e.track_id for e in es]
+    for i, e in enumerate(es):
+        assert np.array_equal(s.prior[i], e.x if e.prior_x is None else e.prior_x)
+        assert s.meas[i] == (e.meas_pos is not None)
+        if e.meas_pos is not None:
+            assert np.array_equal(s.meas_pos[i], e.meas_pos[:2])
+        assert s.mode[i] == (e.mode_probabilities is not None)
+        if e.mode_probabilities is not None:
+            assert np.array_equal(s.mu[i], e.mode_probabilities)
+    for sensor, u in s.updates.items():
+        want = [i for i, e in enumerate(es) if e.sensor_id == sensor and e.y is not None]
+        assert u.rows.tolist() == want
+        for j, i in enumerate(want):
+            e = es[i]
+            assert np.array_equal(u.Y[j], e.y) and np.array_equal(u.S[j], e.S) and u.nis[j] == e.nis
+            assert u.gain[j] == (e.H is not None)
+            if e.H is not None:
+                assert np.array_equal(u.H[j], e.H) and np.array_equal(u.Pm[j], e.prior_P)
+    assert sorted(s.updates) == sorted({e.sensor_id for e in es if e.y is not None})
+
+
+def test_stacked_of_and_concat() -> None:
     a, b = _estimates(9, 1), _estimates(5, 2)
-    fa, fb = Fields.of(a), Fields.of(b)
-    _same(fa, a)
-    _same(fa.take([8, 0, 3]), [a[8], a[0], a[3]])
-    _same(Fields.concat([fa, fb]), a + b)
-    _same(Fields.of([]), [])
-    _same(Fields.concat([fa, Fields.of([])]).take([]), [])
+    _same(_of(a), a)
+    _same(Stacked.concat([_of(a), _of(b)]), a + b)
+    no_modes = [e for e in b if e.mode_probabilities is None]
+    _same(Stacked.concat([_of(no_modes), _of(a)]), no_modes + a)
