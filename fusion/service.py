@@ -9,7 +9,8 @@ memory stays bounded and a Zenoh channel is never left undrained.
 Queryables (answers prepared by the loop, so callbacks never touch the tracker):
   fusion/<ns>/status     ServiceStatus (msgpack)
   fusion/<ns>/snapshot   the latest estimate of every confirmed track (msgpack list);
-                         with ?t_ns=T every confirmed track predicted to T (answered by the loop)
+                         with ?t_ns=T every confirmed track predicted to T (answered by the loop;
+                         fusion.snapshot_answers)
 Publications: fusion/<ns>/tracks/<id> (estimates), fusion/<ns>/events/<id> (confirmed,
 coasting, deleted with the reason, withdrawals; fusion.publication) and, with [publication]
 period_s, fusion/<ns>/predicted (fusion.prediction); with smooth_lag, fusion/<ns>/smoothed/<id>
@@ -25,7 +26,6 @@ import dataclasses
 import logging
 import threading
 import time
-from collections import deque
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -47,7 +47,8 @@ from fusion.io.zenoh_advanced import RecoveringSubscription
 from fusion.io.zenoh_bus import connection_of, open_with_retry
 from fusion.io.zenoh_publishers import KeyedPublishers
 from fusion.pipeline import Pipeline, Record
-from fusion.prediction import Cadence, encode_predicted, predicted_key, snapshot_time
+from fusion.prediction import Cadence, encode_predicted, predicted_key
+from fusion.snapshot_answers import SnapshotAnswers
 from fusion.tracking.detection import Reason
 from fusion.tracking.results import Counts, Estimate
 from fusion.tracking.tracker import Tracker
@@ -97,15 +98,13 @@ class Service:
         self._settled = 0  # samples fully handled (published, status refreshed) when the queue last emptied
         self._started_ns = time.time_ns()
         self._status_payload = b""
-        self._snapshot_payload = b""
         self._status_at = 0.0
-        self._encoded: dict[Any, tuple[Estimate, bytes]] = {}  # estimate key -> (published estimate, its bytes)
+        self.snapshots = SnapshotAnswers(self.ns, self.tracker, self.pipeline.snapshot)
         self.published = 0
         self.events_published = 0
         self.predicted_published = 0  # periodic predicted snapshots
         period_ns = round(config.publication.period_s * 1e9)
         self.cadence = Cadence(period_ns) if period_ns > 0 else None
-        self._queries: deque[tuple[Any, int]] = deque()  # snapshot?t_ns queries for the loop
         lag = config.publication.smooth_lag
         self.lag_smoother = FixedLagSmoother(self.tracker, lag) if lag > 0 else None
         self.smoothed_published = 0
@@ -132,25 +131,8 @@ class Service:
         query.reply(wire.status_key(self.ns), self._status_payload)
 
     def _on_snapshot(self, query: Any) -> None:
-        try:
-            t_ns = snapshot_time(query.parameters)
-        except ValueError as e:
-            query.reply_err(str(e))
-            return
-        if t_ns is None:
-            query.reply(wire.snapshot_key(self.ns), self._snapshot_payload)
-            return
-        self._queries.append((query, t_ns))  # the loop owns the tracker: it answers
-        self._wake.set()
-
-    def _answer_queries(self) -> None:
-        """Answer the snapshot?t_ns queries waiting (tracker thread)."""
-        while self._queries:
-            query, t_ns = self._queries.popleft()
-            try:
-                query.reply(wire.snapshot_key(self.ns), encode_predicted(self.tracker, t_ns))
-            finally:
-                query.drop()
+        if self.snapshots.on_query(query):  # a ?t_ns query: the loop answers (fusion.snapshot_answers)
+            self._wake.set()
 
     def _open_outputs(self) -> None:
         """Create the recording and the stream file (only once the session is open, so that a
@@ -230,12 +212,12 @@ class Service:
         self._processed += len(batch)
         enc = wire.estimate_encoder(self.tracker.layout, self.tracker.model_name)
         BLOCK = self._zenoh.CongestionControl.BLOCK
-        encoded = self._encoded
+        kept = self.snapshots.published
         pubs = self._publishers()
         payloads = wire.estimates_encoder(self.tracker.layout, self.tracker.model_name)(out.to_publish)
         for e, payload in zip(out.to_publish, payloads, strict=True):
             pubs.put(e.track_id, payload)
-            encoded[e.key] = (e, payload)  # the snapshot reuses the bytes (_refresh_status)
+            kept(e, payload)  # the snapshot reuses the bytes (_refresh_status)
             self.published += 1
             if self.on_publish is not None:
                 self.on_publish(e)
@@ -286,7 +268,7 @@ class Service:
                     if not self._q and self._settled != self._processed + self._q.refused_total:
                         self._refresh_status(force=True)  # samples refused at the door since the last batch
                         self._settled = self._processed + self._q.refused_total
-                self._answer_queries()
+                self.snapshots.answer_waiting()
                 if self._guard is not None:
                     self._guard.maybe_flush()
                 if self._retention is not None:
@@ -318,7 +300,7 @@ class Service:
         if self.checkpoints is not None:
             self.checkpoints.write(self.tracker)
         self._refresh_status(force=True)
-        self._answer_queries()
+        self.snapshots.answer_waiting()
         for d in self._decls[3:]:
             d.undeclare()
         self._decls = []
@@ -447,15 +429,4 @@ class Service:
         self._status_payload = wire.encode_status(self.status_dict())
         if self._track_pubs is not None:  # deleted tracks give their publishers back
             self._track_pubs.retire(set(self.tracker.track_set.ids.tolist()))
-        enc = wire.estimate_encoder(self.tracker.layout, self.tracker.model_name)
-        was, now_encoded = self._encoded, {}
-        parts = []
-        for e in self.pipeline.snapshot():  # published estimates: their bytes were kept when published
-            k = e.key
-            c = was.get(k)
-            if c is None or c[0] is not e:
-                c = (e, enc(e))
-            now_encoded[k] = c
-            parts.append(c[1])
-        self._encoded = now_encoded  # only the snapshot's: bounded by the live tracks
-        self._snapshot_payload = wire.snapshot_of_encoded(parts)
+        self.snapshots.refresh()
