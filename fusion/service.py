@@ -124,7 +124,11 @@ class Service:
     # ---- Zenoh side ----------------------------------------------------------------------------
     def _on_sample(self, sample: Any) -> None:
         payload = sample.payload
-        if self._q.offer(time.time_ns(), str(sample.key_expr), len(payload), payload.to_bytes) is None:
+        queued = self._q.offer(time.time_ns(), str(sample.key_expr), len(payload), payload.to_bytes) is None
+        # Event.set takes the event's lock even when it is set (0.55 us against 0.03 for is_set, on
+        # every sample of a backlog); a set event is safe to skip: the loop clears it only before
+        # its next drain, which takes this sample
+        if queued and not self._wake.is_set():
             self._wake.set()
 
     def _on_status(self, query: Any) -> None:
