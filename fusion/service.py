@@ -216,15 +216,14 @@ class Service:
         self._processed += len(batch)
         enc = wire.estimate_encoder(self.tracker.layout, self.tracker.model_name)
         BLOCK = self._zenoh.CongestionControl.BLOCK
-        kept = self.snapshots.published
         pubs = self._publishers()
         payloads = wire.estimates_encoder(self.tracker.layout, self.tracker.model_name)(out.to_publish)
         for e, payload in zip(out.to_publish, payloads, strict=True):
             pubs.put(e.track_id, payload)
-            kept(e, payload)  # the snapshot reuses the bytes (_refresh_status)
             self.published += 1
             if self.on_publish is not None:
                 self.on_publish(e)
+        self.snapshots.published(out.to_publish, payloads)  # the snapshot reuses the bytes (_refresh_status)
         for ev in out.events_to_publish:
             self.session.put(m.event_key(self.ns, ev.track_id), m.encode(wire.event_message(ev)),
                              congestion_control=BLOCK)

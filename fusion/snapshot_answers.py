@@ -6,7 +6,7 @@
   fusion/<ns>/snapshot?t_ns=T  every confirmed track predicted to T: queued by Zenoh's thread,
                                answered by the loop (`answer_waiting`), which owns the tracker.
 
-The bytes of each published estimate are kept when it is published (`published`), so a
+The bytes of each published estimate are kept when it is published (`published`, per batch), so a
 refresh encodes only the snapshot's estimates that were never published as they stand; the
 kept bytes are bounded by the live tracks (only the snapshot's are kept at each refresh).
 """
@@ -14,7 +14,7 @@ kept bytes are bounded by the live tracks (only the snapshot's are kept at each 
 from __future__ import annotations
 
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Any
 
 from fusion.io import wire
@@ -34,9 +34,9 @@ class SnapshotAnswers:
         self._encoded: dict[Any, tuple[Estimate, bytes]] = {}  # estimate key -> (published estimate, its bytes)
         self._queries: deque[tuple[Any, int]] = deque()  # snapshot?t_ns queries for the loop
 
-    def published(self, e: Estimate, payload: bytes) -> None:
-        """Keep the bytes of a published estimate for the next refresh."""
-        self._encoded[e.key] = (e, payload)
+    def published(self, estimates: Sequence[Estimate], payloads: Sequence[bytes]) -> None:
+        """Keep the bytes of the published estimates (in publication order) for the next refresh."""
+        self._encoded.update({e.key: (e, p) for e, p in zip(estimates, payloads, strict=True)})
 
     def refresh(self) -> None:
         """Rebuild the payload from the current snapshot (loop thread)."""

@@ -20,6 +20,17 @@ def _member(values: np.ndarray, of: np.ndarray) -> np.ndarray:
     return out
 
 
+def positions(ids: np.ndarray, want: np.ndarray, order: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """(index in `ids` of each of `want`, found) for unique ids: found[k] iff want[k] is in ids,
+    and then ids[index[k]] == want[k]. `order`: np.argsort(ids, kind="stable"), if known."""
+    if ids.size == 0:
+        return np.zeros(want.size, dtype=np.intp), np.zeros(want.size, dtype=bool)
+    if order is None:
+        order = np.argsort(ids, kind="stable")
+    at = order[np.minimum(np.searchsorted(ids, want, sorter=order), ids.size - 1)]
+    return at, ids[at] == want
+
+
 def member(values: np.ndarray, of: np.ndarray) -> np.ndarray:
     """values[i] in `of`, for each i of a vector of integers (np.isin(values, of))."""
     if of.size == 0 or values.size == 0:

@@ -32,7 +32,7 @@ import numpy as np
 from fusion.core.association import coarse_pairs
 from fusion.core.checks import Array
 from fusion.tracking.detection import Detection
-from fusion.tracking.id_sets import grown, member
+from fusion.tracking.id_sets import grown, member, positions
 from fusion.tracking.results import Association, EventKind, Outcome, ScanKey
 from fusion.tracking.scan import Coarse, ScanContext, ScanOutcome, Tally, measured_points, run_scan
 from fusion.tracking.trackset import TrackSet
@@ -157,7 +157,7 @@ def _sub_coarse(ids: np.ndarray, sub_seqs: np.ndarray, js: np.ndarray, gates: Ga
     coarse_pairs on the part gives them (the reach is closed under the pairs: a pair with one
     end in it has both)."""
     inside = member(gates.ids, ids)
-    i = _lookup(ids, gates.ids[inside])[0]
+    i = positions(ids, gates.ids[inside])[0]
     j = np.searchsorted(sub_seqs, gates.seqs[inside])
     o = np.lexsort((i, j))
     return Coarse(i[o].astype(np.intp), j[o].astype(np.intp), gates.mpos[js], gates.mvar[js])
@@ -260,15 +260,6 @@ def _spliced(stored: list[Association], old_j: np.ndarray, n: int, part: list[As
     for a, j in zip(part, js.tolist(), strict=True):
         out[j] = a
     return out
-
-
-def _lookup(ids: np.ndarray, want: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(index in ids of each of want, found) for unique ids."""
-    if ids.size == 0:
-        return np.zeros(want.size, dtype=np.intp), np.zeros(want.size, dtype=bool)
-    order = np.argsort(ids, kind="stable")
-    at = order[np.minimum(np.searchsorted(ids, want, sorter=order), ids.size - 1)]
-    return at, ids[at] == want
 
 
 def _assemble(ts: TrackSet, rows: np.ndarray, sub_after: TrackSet | None, old: Stored, rerun_seqs: np.ndarray,

@@ -24,7 +24,7 @@ import numpy as np
 from fusion.core.checks import Array
 from fusion.core.gaussian import GaussianState
 from fusion.core.imm import IMMState
-from fusion.tracking.id_sets import member
+from fusion.tracking.id_sets import member, positions
 
 
 class Status(IntEnum):
@@ -177,13 +177,9 @@ class TrackSet:
     def rows_of(self, ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(row of each of `ids`, found): found[k] iff the set holds a track ids[k], and then
         row[k] is its row (by binary search over the ids' order, sorted once per set)."""
-        n = len(self)
-        if n == 0:
-            return np.zeros(ids.size, dtype=np.intp), np.zeros(ids.size, dtype=bool)
         if self._order is None:
             self._order = np.argsort(self.ids, kind="stable")
-        at = self._order[np.minimum(np.searchsorted(self.ids, ids, sorter=self._order), n - 1)]
-        return at, self.ids[at] == ids
+        return positions(self.ids, ids, self._order)
 
     def state(self, i: int) -> GaussianState | IMMState:
         t = int(self.t_ns[i])
