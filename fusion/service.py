@@ -53,6 +53,7 @@ from fusion.tracking.detection import Reason
 from fusion.tracking.results import Counts, Estimate
 from fusion.tracking.tracker import Tracker
 from fusion.tracking.trackset import Status
+from fusion.tracking.warmup import warm_up
 
 log = logging.getLogger("fusion.service")
 
@@ -168,14 +169,26 @@ class Service:
         self._guard = None if self.sink is None else GuardedSink(self.sink)
         self.pipeline.sink = self._guard
 
+    def _warm_up(self) -> None:
+        """Before anything subscribes: the first call of a compiled kernel compiles it (about 20 s
+        on the first run after an install, then loaded from numba's cache), which would otherwise
+        fall on the first measurements and put the service that far behind its sensors."""
+        t0 = time.perf_counter()
+        ran = warm_up(self.config.tracker)
+        took = time.perf_counter() - t0
+        log.log(logging.WARNING if took > 5.0 else logging.INFO,
+                "tracker kernels ready in %.1f s (%d synthetic measurements)%s", took, ran.detections,
+                "; compiled on this first run after an install, cached for the next ones" if took > 5.0 else "")
+
     def _resume(self) -> None:
         """Restore a usable checkpoint into the tracker, in place (fusion.io.checkpointer)."""
         if self.checkpoints is not None and self.checkpoints.resume(self.tracker):
             self._base_counts = self.pipeline.counts()
 
     def open(self) -> None:
-        """Open the Zenoh session, then the output files, then declare the subscribers and
-        queryables."""
+        """Compile the tracker's kernels (fusion.tracking.warmup), open the Zenoh session, then
+        the output files, then declare the subscribers and queryables."""
+        self._warm_up()
         zc = self.config.zenoh
         self.session, self._connect_attempts = open_with_retry(zc, namespace=self.ns, stop=self._stop)
         if self.session is None:  # stopped while connecting: nothing was opened
