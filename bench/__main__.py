@@ -1,5 +1,6 @@
 """`python -m bench [--quick] [--only e2e,core,tracker,gospa,recording,intake,late]`: every benchmark, one command.
-`--only soak` (never in the default run): the service's memory over `--soak-s` seconds.
+`--only soak` (never in the default run): the service's memory over `--soak-s` seconds, sampled
+every `--soak-every-s` (bench.soak).
 
 Each benchmark measures its baselines in the same run, interleaved, and prints ratios. The
 machine's state (other processes) moves absolute figures; the ratios are the comparison.
@@ -45,6 +46,7 @@ def main(argv: list[str] | None = None) -> int:
                    help="comma-separated: e2e, core, tracker, gospa, recording, intake, late;"
                         " soak (not in the default)")
     p.add_argument("--soak-s", type=float, default=600.0, help="duration of the soak (default 600 s)")
+    p.add_argument("--soak-every-s", type=float, default=10.0, help="the soak's sampling period (default 10 s)")
     p.add_argument("--json", type=Path, help="also write the figures to this file")
     args = p.parse_args(argv)
     from fusion.io.blas import pin_blas_threads
@@ -62,9 +64,9 @@ def main(argv: list[str] | None = None) -> int:
 
             results["e2e"] = service_e2e.run(quick=args.quick)
         elif name == "soak":
-            from bench import service_e2e
+            from bench import soak
 
-            results["soak"] = service_e2e.run_soak(duration_s=args.soak_s)
+            results["soak"] = soak.run_soak(duration_s=args.soak_s, every_s=args.soak_every_s)
         elif name == "core":
             from bench import core_step
 

@@ -152,6 +152,21 @@ class ServiceProcess:
         self._kill()
 
 
+def prime(svc: ServiceProcess, pub: Publisher, *, timeout_s: float) -> tuple[float, m.Counts]:
+    """Send the primer (a few scans of 3 far-away targets, sensor times = now) and wait until the
+    service has handled it: imports, compiled kernels and the recording are loaded before any
+    timing. Returns the seconds it took and the counts then."""
+    t = time.monotonic()
+    received0 = svc.status().counts.received  # type: ignore[union-attr]
+    sent = pub.call("prime")["sent"]
+    while time.monotonic() < t + timeout_s:
+        st = svc.status()
+        if st is not None and st.counts.received >= received0 + sent and st.counts.queued == 0:
+            return time.monotonic() - t, st.counts
+        time.sleep(0.1)
+    raise TimeoutError(f"the service did not handle the primer within {timeout_s:.0f} s")
+
+
 class Publisher:
     """The publisher process (bench.e2e_load.publisher_main): `call(cmd, arg)` waits for the
     reply (deadline), `send` + `result` split it so the caller can poll meanwhile."""

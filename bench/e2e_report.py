@@ -90,20 +90,3 @@ def print_latency(out: dict[str, Any], *, repeats: int, duration_s: float) -> No
             print(f"{rate:>8} {rs[0]['targets']:>7} {'on' if rec else 'off':>9} {lat_cell(rs, 'p50_ms'):>22} "
                   f"{lat_cell(rs, 'p99_ms'):>22} {lat_cell(rs, 'max_ms'):>22} "
                   f"{spread([r['coverage'] for r in rs], '.2f'):>18}  {'; '.join(notes)}")
-
-
-def print_soak(r: dict[str, Any]) -> None:
-    print(f"\nsoak: {r['rate']}/s offered ({r['targets']} targets) for {r['duration_s']:.0f} s, recording "
-          f"{'on' if r['recording'] else 'off'}; service VmRSS every 10 s (queued: as of the last status refresh)")
-    for s in r["samples"]:
-        print(f"  t={s['t_s']:>5.0f} s  rss {s['rss_mb']:8.1f} MB "
-              f"(anon {s['anon_mb']:7.1f}, file {s['file_mb']:6.1f})  "
-              f"queued {s['queued']}  applied {s['applied']}")
-    print(f"RSS start {r['rss_start_mb']:.1f} MB, end {r['rss_end_mb']:.1f} MB, max {r['rss_max_mb']:.1f} MB, "
-          f"slope {r['slope_mb_per_min']:+.2f} MB/min, max/min - 1 after the first minute {r['spread_after_1min']:.1%}")
-    print(f"after the first minute: RSS {r['rss_min_after_1min_mb']:.1f}-{r['rss_max_after_1min_mb']:.1f} MB, slope "
-          f"{r['slope_after_1min_mb_per_min']:+.2f} MB/min, anonymous max/min - 1 {r['anon_spread_after_1min']:.1%}, "
-          f"most queued {r['queued_max_after_1min']} (a backlog is held in memory: the loop did not keep up)")
-    rb = r["recording_bytes_per_meas"]
-    print(f"applied {r['applied']}, queued at the end {r['queued_end']}, refused {r['refused']}, "
-          f"recording {'n/a' if rb is None else f'{rb:.0f}'} bytes per measurement")

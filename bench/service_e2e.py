@@ -9,8 +9,8 @@ messages from the same publisher process to a subscriber process that only count
 Latency: scans due on the wall clock (t_ns = due time), each sent as one burst, at 1k and 10k
 measurements/s offered (67 and 667 targets at 15 messages per target per second); latency =
 arrival of an estimate at a subscriber here - its t_ns, the first revision of each estimate,
-after a warm-up of 2 s. Soak: 10k/s offered for soak_s, the service's resident memory every 10 s
-(fusion.io.memory: total, anonymous, file-backed); spread and slope over the samples after the first minute.
+after a warm-up of 2 s. The soak (10k/s offered for soak_s, the service's resident memory) is
+bench.soak.
 """
 
 from __future__ import annotations
@@ -25,28 +25,12 @@ from typing import Any
 import numpy as np
 
 from bench.e2e_load import MSGS_PER_TARGET_S
-from bench.e2e_procs import Publisher, ServiceProcess, zenoh_baseline
+from bench.e2e_procs import Publisher, ServiceProcess, prime, zenoh_baseline
 from fusion import messages as m
-from fusion.io.memory import process_memory
 
 
 def _counts_add_up(c: m.Counts) -> bool:
     return c.received == c.applied + c.truth + c.duplicates + sum(c.refused.values()) + c.queued
-
-
-def prime(svc: ServiceProcess, pub: Publisher, *, timeout_s: float) -> tuple[float, m.Counts]:
-    """Send the primer (a few scans of 3 far-away targets, sensor times = now) and wait until the
-    service has handled it: imports, compiled kernels and the recording are loaded before any
-    timing. Returns the seconds it took and the counts then."""
-    t = time.monotonic()
-    received0 = svc.status().counts.received  # type: ignore[union-attr]
-    sent = pub.call("prime")["sent"]
-    while time.monotonic() < t + timeout_s:
-        st = svc.status()
-        if st is not None and st.counts.received >= received0 + sent and st.counts.queued == 0:
-            return time.monotonic() - t, st.counts
-        time.sleep(0.1)
-    raise TimeoutError(f"the service did not handle the primer within {timeout_s:.0f} s")
 
 
 def throughput_run(pub: Publisher, folder: Path, *, n: int, targets: int, recording: bool, window_s: float,
@@ -174,67 +158,6 @@ def latency_run(pub: Publisher, folder: Path, *, rate: int, recording: bool, dur
     }
 
 
-def soak_run(pub: Publisher, folder: Path, *, duration_s: float, rate: int = 10_000, every_s: float = 10.0,
-             recording: bool = True) -> dict:
-    targets = round(rate / MSGS_PER_TARGET_S)
-    folder.mkdir()
-    samples: list[dict[str, Any]] = []
-    with ServiceProcess(folder, recording=recording) as svc:
-        pub.call("connect", svc.endpoint)
-        prime(svc, pub, timeout_s=120.0)
-        start_ns = time.time_ns() + 1_000_000_000
-        pub.send("paced", {"targets": targets, "seed": 11, "start_ns": start_ns, "duration_s": duration_s})
-        t0 = time.monotonic() + 1.0
-        k = 0
-        while True:
-            wait = t0 + k * every_s - time.monotonic()
-            if pub.conn.poll(max(wait, 0.0)):
-                break
-            st = svc.status()
-            mem = process_memory(svc.pid)
-            samples.append({"t_s": k * every_s, "rss_mb": mem.rss_mb, "anon_mb": mem.anon_mb, "file_mb": mem.file_mb,
-                            "queued": st.counts.queued if st else None, "applied": st.counts.applied if st else None,
-                            "recording_bytes": st.recording_bytes if st else None})
-            k += 1
-        sent = pub.result(60.0)
-        st = svc.status()
-        end_rss = svc.rss_kb() / 1024
-        pub.call("disconnect")
-    c = st.counts if st else None
-    return {
-        "duration_s": duration_s, "rate": rate, "recording": recording, "targets": targets, "sent": sent["sent"],
-        "samples": samples, "rss_end_mb": end_rss, **soak_figures(samples),
-        "applied": None if c is None else c.applied, "queued_end": None if c is None else c.queued,
-        "refused": None if c is None else dict(c.refused),
-        "recording_bytes_per_meas": None if st is None or not c.applied else st.recording_bytes / c.applied,
-    }
-
-
-def soak_figures(samples: list[dict[str, Any]], *, settle_s: float = 60.0) -> dict[str, Any]:
-    """Over a soak's samples (t_s, rss_mb, anon_mb, queued): start, min and max RSS and its slope
-    (least squares, MB per minute) over all samples, and over those after `settle_s` (the first
-    minute: imports, compiled kernels, the tracks' birth, the history window filling) the spread
-    max/min - 1 of RSS and of anonymous memory, min, max, slope and the largest backlog (queued)."""
-    rss = np.array([s["rss_mb"] for s in samples])
-    anon = np.array([s["anon_mb"] for s in samples])
-    t = np.array([s["t_s"] for s in samples])
-    after = t >= settle_s if (t >= settle_s).sum() >= 2 else np.ones(len(t), dtype=bool)
-    late = rss[after]
-
-    def slope(tt: np.ndarray, y: np.ndarray) -> float:
-        return float(np.polyfit(tt, y, 1)[0] * 60) if len(y) >= 2 else float("nan")
-
-    queued = [s["queued"] for s, a in zip(samples, after.tolist(), strict=True) if a and s["queued"] is not None]
-    return {
-        "rss_start_mb": float(rss[0]), "rss_max_mb": float(rss.max()), "rss_min_mb": float(rss.min()),
-        "slope_mb_per_min": slope(t, rss), "spread_after_1min": float(late.max() / late.min() - 1),
-        "rss_min_after_1min_mb": float(late.min()), "rss_max_after_1min_mb": float(late.max()),
-        "slope_after_1min_mb_per_min": slope(t[after], late),
-        "anon_spread_after_1min": float(anon[after].max() / anon[after].min() - 1),
-        "queued_max_after_1min": max(queued, default=None),
-    }
-
-
 def run(*, quick: bool = False) -> dict[str, Any]:
     from bench.e2e_report import latency_line, print_latency, print_throughput, throughput_line
 
@@ -270,12 +193,3 @@ def run(*, quick: bool = False) -> dict[str, Any]:
     print_throughput(out, repeats=repeats, n=n)
     print_latency(out, repeats=repeats, duration_s=dur)
     return out
-
-
-def run_soak(*, duration_s: float = 600.0) -> dict[str, Any]:
-    from bench.e2e_report import print_soak
-
-    with tempfile.TemporaryDirectory(prefix="fusion-soak-") as d, Publisher() as pub:
-        r = soak_run(pub, Path(d) / "soak", duration_s=duration_s) | {"loadavg_start": os.getloadavg()}
-    print_soak(r)
-    return r

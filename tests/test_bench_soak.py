@@ -1,10 +1,10 @@
-"""The soak's figures (bench.service_e2e.soak_figures) from its samples."""
+"""The soak's figures (bench.soak.soak_figures) from its samples."""
 
 from __future__ import annotations
 
 import pytest
 
-from bench.service_e2e import soak_figures
+from bench.soak import soak_figures
 
 
 def _samples(rss: list[float], queued: list[int] | None = None) -> list[dict]:
