@@ -186,14 +186,15 @@ class Service:
             self._base_counts = self.pipeline.counts()
 
     def open(self) -> None:
-        """Compile the tracker's kernels (fusion.tracking.warmup), open the Zenoh session, then
-        the output files, then declare the subscribers and queryables."""
-        self._warm_up()
+        """Open the Zenoh session, compile the tracker's kernels (fusion.tracking.warmup), then
+        the output files, then declare the subscribers and queryables. The session comes first so
+        that a busy port fails at once, not after the seconds a first compile can take."""
         zc = self.config.zenoh
         self.session, self._connect_attempts = open_with_retry(zc, namespace=self.ns, stop=self._stop)
         if self.session is None:  # stopped while connecting: nothing was opened
             return
         try:
+            self._warm_up()
             self._resume()
             self._open_outputs()
         except BaseException:
