@@ -6,7 +6,8 @@ written with one call per entity, and the number of entities is bounded: the dat
 three all-track entities (record/*: one row per estimate, association or event), written every
 `flush_interval_s` (checked on each step), at `flush_rows` pending rows and at `flush()`/`close()`;
 everything else (measured points, events as text, trails, truth, counts, OSPA/GOSPA, and the
-first MAX_VIEWED confirmed tracks' own entities: their time series and cursor marks, ~15 each) is
+first MAX_VIEWED confirmed tracks' own entities, chosen by the data (fusion.io.viewed): their
+time series and cursor marks, ~15 each) is
 written every `view_interval_s` (VIEW_INTERVAL_S, and at `flush()`/`close()`): a killed writer
 loses at most that much of them, never more than flush_interval_s of the record. Rows are kept as
 numpy blocks per entity (fusion.io.columns) and the viewed tracks' estimates as stacked arrays,
@@ -54,6 +55,7 @@ from fusion.io.columns import Column, components, stack, time_column
 from fusion.io.derive import world
 from fusion.io.labels import is_epoch, short_id
 from fusion.io.palette import colour
+from fusion.io.viewed import FINAL
 from fusion.tracking.results import Estimate, StepResult
 
 
@@ -106,6 +108,7 @@ class RerunSink:
         self._step = 0
         self._counts = counts
         self._newest_t = 0
+        self._horizon_ns: int | None = None  # the newest StepResult.horizon_ns: rows before it are final
         self._epoch: bool | None = None  # t is an epoch time (decided from the first rows)
         self._arrival_epoch: bool | None = None
         self._written: set[str] = set()
@@ -181,6 +184,9 @@ class RerunSink:
         at the next flush, for all the steps since the last one at once (`_rows_of_steps`)."""
         self._step += 1
         step = self._step
+        h = result.horizon_ns
+        if h is not None and (self._horizon_ns is None or h > self._horizon_ns):
+            self._horizon_ns = h
         ms, A, E = result.measurements, result.associations, result.estimates
         if ms or A:
             self._steps.append((ms, A, step, arrival_ns))
@@ -268,7 +274,10 @@ class RerunSink:
             W = world(S[:, self.rows.pi])
             self.col("world/truth", "points", rgba=colour("truth"), radius=-1.5).extend(
                 t_t, step_t, t_t, p=W[:, None, :])
-        scored = self.rows.score(E, t_est, arr_e, stp_e, self)
+        horizon = FINAL if ends else self._horizon_ns
+        if horizon is not None and self._est[0]:  # rows waiting for the next flush are not final either
+            horizon = min(horizon, min(e.t_ns for e in self._est[0]))
+        scored = self.rows.score(E, t_est, arr_e, stp_e, self, horizon_ns=horizon)
         if scored is not None:
             self._scored.append(scored)
         if self._counts is not None and self._pending:

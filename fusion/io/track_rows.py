@@ -18,11 +18,12 @@ from fusion.io.columns import stack
 from fusion.io.labels import short_id
 from fusion.io.palette import colour, series_colours
 from fusion.io.view_rows import Stacked
+from fusion.io.viewed import ViewedTracks
 from fusion.tracking.results import Estimate
 
 OSPA_EVERY_NS = 1_000_000_000  # OSPA / GOSPA at most once per second of sensor time
 OSPA_MAX_POINTS = 300  # and for scenes of at most this many tracks and targets (the assignment is cubic)
-MAX_VIEWED = 6  # tracks with views of their own: the first confirmed ones
+MAX_VIEWED = 6  # tracks with views of their own: the first confirmed ones (fusion.io.viewed)
 TRUTH_KEPT = 100_000  # truth times kept for scoring (the oldest half dropped past this)
 # measurements in the position panels: the role's colour, translucent and small. Rerun draws a
 # plot's points after all of its lines whatever the entity order (seen in screenshots, 0.41), so
@@ -40,7 +41,9 @@ class Rows:
         self.ki = sorted(set(pi) | set(vi))  # kinematic components: what NEES is computed over
         self.axes = [layout[i] for i in pi]
         self.truth: dict[int, dict[str, Array]] = defaultdict(dict)
-        self.viewed: dict[int, str] = {}  # track id -> label, in order of confirmation
+        self.choice = ViewedTracks(MAX_VIEWED)
+        self.viewed = self.choice.labels  # track id -> label, in order of (first confirmed t_ns, id)
+        self._held: list[Stacked] = []  # the candidates' rows, until the choice is settled
         self._last: dict[int, tuple[int, int, int, Array]] = {}  # viewed track -> newest (t, step, arrival, world)
         self._trail: dict[int, tuple[int, Array, float]] = {}  # viewed track -> last trail ellipse (fusion.io.trail)
         self._lo = np.full(3, np.inf)
@@ -50,7 +53,9 @@ class Rows:
 
     def continue_from(self, other: Rows) -> None:
         self.truth.update(other.truth)
-        self.viewed = dict(other.viewed)
+        self.choice.continue_from(other.choice)
+        self.viewed = self.choice.labels
+        self._held = list(other._held)
         self._last = dict(other._last)
         self._trail = dict(other._trail)
         self._lo, self._hi, self._next_ospa = other._lo.copy(), other._hi.copy(), other._next_ospa
@@ -76,14 +81,19 @@ class Rows:
         return s
 
     # ---- one flush -------------------------------------------------------------------------------
-    def score(self, E: list[Estimate], t: Array, arr: Array, step: Array, sink: Any) -> Stacked | None:
+    def score(self, E: list[Estimate], t: Array, arr: Array, step: Array, sink: Any, *,
+              horizon_ns: int | None) -> Stacked | None:
         """The record/estimates rows of a record flush's estimates (E, with their times t, arrival
         times and steps, int64 arrays), scored against the truth at
         their times (retractions as NaN rows), the trails (world/estimates, world/tentative) and
-        OSPA/GOSPA; picks the viewed tracks (the first MAX_VIEWED confirmed ones, in row order) and
-        widens the scene's extent. Returns the viewed tracks' confirmed rows, stacked, for `views`
-        (None if none): what is kept until the view flush is bounded by the viewed tracks, not
-        by the number of tracks."""
+        OSPA/GOSPA; notes the candidates for views of their own and settles the choice up to
+        `horizon_ns` (fusion.io.viewed: nothing before it can change any more), and widens the
+        scene's extent. Returns the confirmed rows of the viewed tracks and of the candidates,
+        stacked, for `views` (None if none): what is kept until the view flush is bounded by
+        the viewed tracks (and, until the choice is settled, the candidates), not by the number
+        of tracks."""
+        self.choice.note(E)
+        self.choice.settle(horizon_ns)
         if not E:
             return None
         rec = sink.col("record/estimates", "record")
@@ -132,19 +142,14 @@ class Rows:
         if conf.any():
             self._lo = np.minimum(self._lo, W[conf].min(axis=0))
             self._hi = np.maximum(self._hi, W[conf].max(axis=0))
-        for i in np.flatnonzero(conf).tolist():
-            if len(self.viewed) >= MAX_VIEWED:
-                break
-            if ids[i] not in self.viewed:
-                self.viewed[ids[i]] = short_id(ids[i])
         for mask, entity, role, radius in ((conf, "world/estimates", "estimate", -2.0),
                                            (~conf, "world/tentative", "tentative", -1.5)):
             if mask.any():
                 sink.col(entity, "points", rgba=colour(role), radius=radius).extend(
                     t[mask], step[mask], arr[mask], p=W[mask][:, None, :])
         self._set_distances(sink, t, step, arr, W, conf, ids)
-        viewed = self.viewed
-        sel = np.array([i for i, tid in enumerate(ids) if tid in viewed and conf[i]], dtype=np.int64)
+        kept = self.choice.kept
+        sel = np.array([i for i, tid in enumerate(ids) if conf[i] and kept(tid)], dtype=np.int64)
         if not sel.size:
             return None
         return Stacked.of([E_[i] for i in sel.tolist()], t[sel], step[sel], arr[sel], X[sel], P[sel], std[sel],
@@ -153,13 +158,21 @@ class Rows:
 
     def views(self, batches: list[Stacked], sink: Any) -> None:
         """The viewed tracks' time series and cursor marks, from their rows of the record flushes
-        since the last view flush (in their order)."""
-        if not batches:
+        since the last view flush (in their order), and from the rows held for them while they
+        were candidates; the rows of the candidates still undecided are held for the next."""
+        parts = self._held + batches
+        self._held = []
+        if not parts:
             return
-        c = batches[0] if len(batches) == 1 else Stacked.concat(batches)
+        c = parts[0] if len(parts) == 1 else Stacked.concat(parts)
         present = set(c.ids.tolist())
-        for tid in [tid for tid in self.viewed if tid in present]:  # in order of confirmation
+        for tid in [tid for tid in self.viewed if tid in present]:  # in their order
             self._track(sink, tid, np.flatnonzero(c.ids == tid), c)
+        undecided = self.choice.candidates()
+        if undecided:
+            rows = np.flatnonzero(np.isin(c.ids, np.fromiter(undecided, dtype=np.int64, count=len(undecided))))
+            if rows.size:
+                self._held = [c.take(rows)]
 
     def _set_distances(self, sink: Any, t: Array, step: Array, arr: Array, W: Array, conf: Array,
                        ids: list[int]) -> None:

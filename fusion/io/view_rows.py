@@ -122,3 +122,18 @@ class Stacked:
         cat = {f: np.concatenate([getattr(p, f) for p in parts]) for f in ("ids", "conf", "prior", "meas", "meas_pos",
                                                                             "mode")}
         return cls(*arrays, mu=mu, updates=updates, **cat)
+
+    def take(self, rows: Array) -> Stacked:
+        """The given rows (indices, increasing), in their order; each sensor's updates renumbered."""
+        new = np.full(len(self.t), -1, dtype=np.int64)
+        new[rows] = np.arange(len(rows))
+        updates = {}
+        for sensor, u in self.updates.items():
+            keep = new[u.rows] >= 0
+            if keep.any():
+                updates[sensor] = Updates(new[u.rows[keep]], *(getattr(u, f)[keep]
+                                                               for f in ("Y", "S", "nis", "gain", "H", "Pm")))
+        return Stacked(*(getattr(self, f)[rows] for f in ("t", "step", "arr", "X", "P", "std", "err", "matched",
+                                                           "nees", "TX", "W")),
+                       mu=None if self.mu is None else self.mu[rows], updates=updates,
+                       **{f: getattr(self, f)[rows] for f in ("ids", "conf", "prior", "meas", "meas_pos", "mode")})

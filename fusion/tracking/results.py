@@ -203,3 +203,6 @@ class StepResult:
     replays: tuple[Replay, ...]
     associations: tuple[Association, ...]
     measurements: tuple[MeasuredPoint, ...] = ()
+    # sensor time before which nothing can change any more after this call (Tracker.horizon_ns;
+    # None before the window has one): what a consumer derived from earlier rows is final
+    horizon_ns: int | None = None

@@ -165,7 +165,7 @@ class Tracker:
         changed."""
         accepted, inputs, refused = self._admit(items)
         if not accepted and not inputs:
-            return StepResult((), (), tuple(refused), 0, (), ())
+            return StepResult((), (), tuple(refused), 0, (), (), horizon_ns=self.horizon_ns)
         scans: dict[ScanKey, list[Detection]] = {}
         for d in accepted:
             scans.setdefault((d.t_ns, d.sensor_id), []).append(d)
@@ -204,7 +204,7 @@ class Tracker:
         self._ts = ts
         self._commit()
         return StepResult(tuple(estimates), tuple(events), tuple(refused), len(accepted), replays, tuple(assoc),
-                          tuple(points))
+                          tuple(points), self.horizon_ns)
 
     def _rerun(self, ts: TrackSet, key: ScanKey, dets: tuple[Detection, ...], prev: Entry | None,
                after: TrackSet | None, hint: Hint | None) -> Partial | None:
