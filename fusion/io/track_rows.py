@@ -42,7 +42,6 @@ class Rows:
         self.axes = [layout[i] for i in pi]
         self.truth: dict[int, dict[str, Array]] = defaultdict(dict)
         self.choice = ViewedTracks(MAX_VIEWED)
-        self.viewed = self.choice.labels  # track id -> label, in order of (first confirmed t_ns, id)
         self._held: list[Stacked] = []  # the candidates' rows, until the choice is settled
         self._last: dict[int, tuple[int, int, int, Array]] = {}  # viewed track -> newest (t, step, arrival, world)
         self._trail: dict[int, tuple[int, Array, float]] = {}  # viewed track -> last trail ellipse (fusion.io.trail)
@@ -54,12 +53,16 @@ class Rows:
     def continue_from(self, other: Rows) -> None:
         self.truth.update(other.truth)
         self.choice.continue_from(other.choice)
-        self.viewed = self.choice.labels
         self._held = list(other._held)
         self._last = dict(other._last)
         self._trail = dict(other._trail)
         self._lo, self._hi, self._next_ospa = other._lo.copy(), other._hi.copy(), other._next_ospa
         self.newest_truth_ns = other.newest_truth_ns
+
+    @property
+    def viewed(self) -> dict[int, str]:
+        """Track id -> label of the viewed tracks, in order of (first confirmed t_ns, id)."""
+        return self.choice.labels
 
     def viewed_labels(self) -> list[str]:
         return list(self.viewed.values())

@@ -25,6 +25,10 @@ from fusion.core.checks import Array
 from fusion.io.columns import stack
 from fusion.tracking.results import Estimate
 
+# Updates' per-row blocks after `rows`, and Stacked's per-row arrays: positional, then keyword
+_UPDATE_BLOCKS = ("Y", "S", "nis", "gain", "H", "Pm")
+_POSITIONAL = ("t", "step", "arr", "X", "P", "std", "err", "matched", "nees", "TX", "W")
+_KEYWORD = ("ids", "conf", "prior", "meas", "meas_pos", "mode")
 _READ = attrgetter("prior_x", "meas_pos", "y", "S", "nis", "sensor_id", "H", "prior_P", "mode_probabilities")
 
 
@@ -42,8 +46,7 @@ class Updates:
     def concat(cls, parts: list[tuple[int, Updates]]) -> Updates:
         """Parts with the row offset of their Stacked in the concatenation."""
         rows = np.concatenate([u.rows + off for off, u in parts])
-        return cls(rows, *(np.concatenate([getattr(u, f) for _, u in parts])
-                           for f in ("Y", "S", "nis", "gain", "H", "Pm")))
+        return cls(rows, *(np.concatenate([getattr(u, f) for _, u in parts]) for f in _UPDATE_BLOCKS))
 
 
 def _filled(n: int, present: Array, values: list[Array], shape: tuple[int, ...]) -> Array:
@@ -108,8 +111,7 @@ class Stacked:
 
     @classmethod
     def concat(cls, parts: list[Stacked]) -> Stacked:
-        arrays = [np.concatenate([getattr(p, f) for p in parts]) for f in
-                  ("t", "step", "arr", "X", "P", "std", "err", "matched", "nees", "TX", "W")]
+        arrays = [np.concatenate([getattr(p, f) for p in parts]) for f in _POSITIONAL]
         offsets = np.cumsum([0] + [len(p.t) for p in parts]).tolist()
         with_mu = [p.mu for p in parts if p.mu is not None]
         mu = None
@@ -119,8 +121,7 @@ class Stacked:
         updates = {s: Updates.concat([(off, p.updates[s]) for off, p in zip(offsets, parts, strict=False)
                                       if s in p.updates])
                    for s in sorted({s for p in parts for s in p.updates})}
-        cat = {f: np.concatenate([getattr(p, f) for p in parts]) for f in ("ids", "conf", "prior", "meas", "meas_pos",
-                                                                            "mode")}
+        cat = {f: np.concatenate([getattr(p, f) for p in parts]) for f in _KEYWORD}
         return cls(*arrays, mu=mu, updates=updates, **cat)
 
     def take(self, rows: Array) -> Stacked:
@@ -131,9 +132,6 @@ class Stacked:
         for sensor, u in self.updates.items():
             keep = new[u.rows] >= 0
             if keep.any():
-                updates[sensor] = Updates(new[u.rows[keep]], *(getattr(u, f)[keep]
-                                                               for f in ("Y", "S", "nis", "gain", "H", "Pm")))
-        return Stacked(*(getattr(self, f)[rows] for f in ("t", "step", "arr", "X", "P", "std", "err", "matched",
-                                                           "nees", "TX", "W")),
-                       mu=None if self.mu is None else self.mu[rows], updates=updates,
-                       **{f: getattr(self, f)[rows] for f in ("ids", "conf", "prior", "meas", "meas_pos", "mode")})
+                updates[sensor] = Updates(new[u.rows[keep]], *(getattr(u, f)[keep] for f in _UPDATE_BLOCKS))
+        return Stacked(*(getattr(self, f)[rows] for f in _POSITIONAL), mu=None if self.mu is None else self.mu[rows],
+                       updates=updates, **{f: getattr(self, f)[rows] for f in _KEYWORD})
