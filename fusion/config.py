@@ -340,6 +340,9 @@ class IntakeConfig(Section):
     loses its oldest ones, or the new sample when it is that source's ("overload"). All counted,
     so memory stays bounded, Zenoh is never blocked, and one source's flood costs only that
     source. `batch_max` samples are processed per tracker call, taken round-robin across sources.
+    A batch waits for a burst still arriving (fusion.io.burst): while samples keep coming, each
+    within `burst_gap_ms` of the last, for at most `burst_linger_ms` (0: no wait), so a sensor's
+    scan reaches the tracker whole instead of run again for its second half.
     `drain_deadline_s`: at shutdown, the queue is drained for at most this long; what is left is
     dropped and counted as "shutdown" (the recording is then closed complete)."""
 
@@ -349,6 +352,8 @@ class IntakeConfig(Section):
     source_rate_hz: NonNegFloat = 0.0
     source_burst: Annotated[int, msgspec.Meta(ge=1)] = 1000
     batch_max: Annotated[int, msgspec.Meta(ge=1)] = 5_000
+    burst_gap_ms: NonNegFloat = 2.0
+    burst_linger_ms: NonNegFloat = 20.0
     drain_deadline_s: NonNegFloat = 10.0
     max_future_wall_s: PosFloat = 3600.0  # refuse sensor times this far ahead of the wall clock
 

@@ -4,7 +4,8 @@ Threads: Zenoh's callback threads only offer (arrival_ns, key, payload) to the i
 (fusion.io.intake_queue: a byte limit per message checked before the payload is copied, bounds
 in samples and bytes, per-source rate limits and fair queueing, every refusal counted by reason)
 and wake the loop; the thread that calls `run` owns the tracker and does everything else, so
-memory stays bounded and a Zenoh channel is never left undrained.
+memory stays bounded and a Zenoh channel is never left undrained. The loop drains batches that
+end where a burst of samples ends (fusion.io.burst), so a sensor's scan is run once, whole.
 
 Queryables (answers prepared by the loop, so callbacks never touch the tracker):
   fusion/<ns>/status     ServiceStatus (msgpack)
@@ -36,6 +37,7 @@ from fusion import messages as m
 from fusion.config import ServiceConfig, mode_names
 from fusion.fixed_lag import FixedLagSmoother, smoothed_key
 from fusion.io import wire
+from fusion.io.burst import drain_burst
 from fusion.io.checkpointer import Checkpointer, counts_since, service_checkpoint_path
 from fusion.io.gain_groups import measured_components
 from fusion.io.intake_queue import IntakeLimits, IntakeQueue
@@ -223,6 +225,11 @@ class Service:
     def _drain(self, limit: int) -> list[Record]:
         return self._q.drain(limit)
 
+    def _drain_burst(self, limit: int) -> list[Record]:
+        """A batch that takes the rest of a burst still arriving (fusion.io.burst)."""
+        ic = self.config.intake
+        return drain_burst(self._q, self._wake, limit, gap_s=ic.burst_gap_ms / 1e3, linger_s=ic.burst_linger_ms / 1e3)
+
     def _step(self, batch: list[Record]) -> None:
         if self.stream is not None:
             self.stream.write_many(batch)
@@ -273,7 +280,7 @@ class Service:
             while not self._stop.is_set():
                 if deadline is not None and time.monotonic() >= deadline:
                     break
-                batch = self._drain(batch_max)
+                batch = self._drain_burst(batch_max)
                 if batch:
                     self._step(batch)
                     if not self._q:  # caught up: make the status answer current at once

@@ -1,0 +1,53 @@
+"""A batch that ends where a burst of samples ends, not halfway through a sensor's scan.
+
+A sensor publishes a scan as a burst: one message per return, all with the scan's time, sent
+back to back (667 returns take a few milliseconds from a Python publisher). The tracker takes a
+scan as every measurement of (t_ns, sensor_id) it holds; a batch drained while the burst is
+still arriving hands it part of the scan, and the rest, in the next batch, runs the scan again
+(a rescan: the same tracks, the same result, but every track the first part missed has coasted
+and is withdrawn again, and every estimate of the first part is revised). Measured at 10k
+measurements/s, 667 targets: ~3 200 coasting events and as many withdrawals per second, more
+rows in the recording than measurements.
+
+`drain_burst` drains up to `limit` samples; while the batch is short of `limit` and samples
+keep coming (one arrived within `gap_s` of the last look), it waits for them, at most
+`linger_s` after the first drain. A quiet queue costs one wait of `gap_s`; a backlog (full
+batches) none. What the tracker computes does not depend on how samples are batched (its
+results are a function of the accepted measurements), only how many revisions it reports on
+the way.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Callable
+from typing import Protocol
+
+Record = tuple[int, str, bytes]
+
+
+class Drainable(Protocol):
+    def __len__(self) -> int: ...
+
+    def drain(self, limit: int) -> list[Record]: ...
+
+
+def drain_burst(q: Drainable, wake: threading.Event, limit: int, *, gap_s: float, linger_s: float,
+                clock: Callable[[], float] = time.monotonic) -> list[Record]:
+    """The oldest `limit` samples of `q`, including those of a burst still arriving (module
+    docstring). `wake` is set by the producer when it queues a sample; it is cleared here before
+    each look at the queue, so a sample queued after the look sets it again."""
+    batch = q.drain(limit)
+    if not batch or linger_s <= 0.0 or gap_s <= 0.0:
+        return batch
+    end = clock() + linger_s
+    while len(batch) < limit:
+        left = end - clock()
+        if left <= 0.0:
+            break
+        wake.clear()
+        if not len(q) and not wake.wait(min(gap_s, left)):
+            break  # nothing for gap_s: the burst is over
+        batch.extend(q.drain(limit - len(batch)))
+    return batch
