@@ -8,8 +8,11 @@ three all-track entities (record/*: one row per estimate, association or event),
 everything else (measured points, events as text, trails, truth, counts, OSPA/GOSPA, and the
 first MAX_VIEWED confirmed tracks' own entities, chosen by the data (fusion.io.viewed): their
 time series and cursor marks, ~15 each) is
-written every `view_interval_s` (VIEW_INTERVAL_S, and at `flush()`/`close()`): a killed writer
-loses at most that much of them, never more than flush_interval_s of the record. Rows are kept as
+written every `view_interval_s` (VIEW_INTERVAL_S, and at `flush()`/`close()`), or at the next
+record flush once it holds `view_rows_max` rows (VIEW_ROWS_MAX: the all-track entities, the
+estimates' and measurements' points and the events, at high rates; so a view flush never converts
+15 s of them at once, which was a +30-90 MB step of resident memory at 10k measurements/s): a
+killed writer loses at most view_interval_s of them, never more than flush_interval_s of the record. Rows are kept as
 numpy blocks per entity (fusion.io.columns) and the viewed tracks' estimates as stacked arrays,
 so the per-track derivation runs once per view flush; what is kept is bounded by the viewed
 tracks' rows and the drawn points, not by the estimates' covariances.
@@ -70,6 +73,10 @@ TRUTH_WAIT_NS = 2_000_000_000
 # ~130 entities (6 tracks' series, counts, trails); every 5 s that was ~10 ms per second of CPU,
 # ~10 us per measurement at 1000 measurements/s. The record is written every flush_interval_s.
 VIEW_INTERVAL_S = 15.0
+# An entity written at the view cadence goes out with the record once it holds this many rows:
+# at 10k estimates/s, world/estimates every 2 s (one send_columns call, ~0.3 ms); the viewed
+# tracks' own entities (a track's rows in 15 s) never get there.
+VIEW_ROWS_MAX = 20_000
 
 
 class RerunSink:
@@ -79,6 +86,7 @@ class RerunSink:
         self, path: str | Path, *, layout: tuple[str, ...], position_indices: tuple[int, ...],
         velocity_indices: tuple[int, ...], recording_id: str = "fusion", application_id: str = "fusion",
         flush_rows: int = 200_000, flush_interval_s: float = 0.5, view_interval_s: float = VIEW_INTERVAL_S,
+        view_rows_max: int = VIEW_ROWS_MAX,
         meta: Mapping[str, Any] | None = None, counts: Callable[[], Mapping[str, int]] | None = None,
         run_id: str | None = None,
     ) -> None:
@@ -105,6 +113,7 @@ class RerunSink:
         self._interval = flush_interval_s
         self._last_flush = self._last_view_flush = time.monotonic()
         self._view_interval = view_interval_s
+        self._view_rows_max = view_rows_max
         self._step = 0
         self._counts = counts
         self._newest_t = 0
@@ -291,7 +300,8 @@ class RerunSink:
             cols, self._cols = self._cols, {}
             self._last_view_flush = time.monotonic()
         else:
-            cols = {k: self._cols.pop(k) for k in [k for k in self._cols if _of_record(k)]}
+            due = [k for k, c in self._cols.items() if _of_record(k) or len(c) >= self._view_rows_max]
+            cols = {k: self._cols.pop(k) for k in due}
         if cols and self._epoch is None:
             firsts = [c.first_times() for c in cols.values() if len(c)]
             self._epoch = bool(firsts) and is_epoch(min(f[0] for f in firsts))
