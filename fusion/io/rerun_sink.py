@@ -10,12 +10,13 @@ first MAX_VIEWED confirmed tracks' own entities, chosen by the data (fusion.io.v
 time series and cursor marks, ~15 each) is
 written every `view_interval_s` (VIEW_INTERVAL_S, and at `flush()`/`close()`), or at the next
 record flush once it holds `view_rows_max` rows (VIEW_ROWS_MAX: the all-track entities, the
-estimates' and measurements' points and the events, at high rates; so a view flush never converts
-15 s of them at once, which was a +30-90 MB step of resident memory at 10k measurements/s): a
-killed writer loses at most view_interval_s of them, never more than flush_interval_s of the record. Rows are kept as
-numpy blocks per entity (fusion.io.columns) and the viewed tracks' estimates as stacked arrays,
-so the per-track derivation runs once per view flush; what is kept is bounded by the viewed
-tracks' rows and the drawn points, not by the estimates' covariances.
+estimates' and measurements' points and the events, at high rates; so a view flush never
+converts 15 s of them at once, which was a +30-90 MB step of resident memory at 10k
+measurements/s): a killed writer loses at most view_interval_s of them, never more than
+flush_interval_s of the record. Rows are kept as numpy blocks per entity (fusion.io.columns)
+and the viewed tracks' estimates as stacked arrays, so the per-track derivation runs once per
+view flush; what is kept is bounded by the viewed tracks' rows and the drawn points, not by the
+estimates' covariances.
 
 Entity layout (positions in metres, world frame, 3-D points: 1-D tracks on the x axis, 2-D in the
 z = 0 plane; track labels are fusion.io.labels.short_id of the id):
