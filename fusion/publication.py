@@ -18,6 +18,7 @@ the latest published estimate of every live confirmed track.
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Iterable
 
 from fusion.tracking.results import Estimate, EstimateKey, EventKind, TrackEvent
@@ -31,15 +32,19 @@ class PublishedView:
         self.tracks: dict[int, int] = {}  # published track ids -> time of their latest published estimate
         self.events: dict[tuple[str, int, int, str], TrackEvent] = {}  # published, not withdrawn
         self._pruned_at: int | None = None
+        self._due: dict[int, list[EstimateKey]] = {}  # t_ns -> the keys of `latest` at that time, for prune
+        self._kept: list[EstimateKey] = []  # keys before the last prune's horizon kept as a track's current key
 
     def select(self, estimates: Iterable[Estimate]) -> tuple[Estimate, ...]:
         """The estimates of one step to publish (see the module docstring); remembers them."""
         out = []
-        latest, tracks, tentative = self.latest, self.tracks, self.publish_tentative
+        latest, tracks, tentative, due = self.latest, self.tracks, self.publish_tentative, self._due
         for e in estimates:
             k = e.key
             st = e.status
             if k in latest or st == "confirmed" or (tentative and st == "tentative"):
+                if k not in latest:
+                    due.setdefault(k[1], []).append(k)
                 latest[k] = e
                 tid, t = e.track_id, e.t_ns
                 last = tracks.get(tid)
@@ -78,15 +83,30 @@ class PublishedView:
             ids, ts, last = ids[rows], ts[rows], last[rows]
         return {(i, t, names[s]) for i, t, s in zip(ids.tolist(), ts.tolist(), last.tolist(), strict=True)}
 
-    def prune(self, horizon_ns: int | None, tracks: TrackSet, *, every_ns: int = 1_000_000_000) -> None:
+    def prune(self, horizon_ns: int | None, tracks: TrackSet, *, every_ns: int = 250_000_000) -> None:
         """Forget keys before the horizon (they can no longer be revised) unless they hold a live
-        track's current estimate. Runs when the horizon has moved by `every_ns` since last time."""
+        track's current estimate. Runs when the horizon has moved by `every_ns` since last time.
+
+        Visits only the keys due: those of the times before the horizon (`_due`, filled by
+        select) and the current keys it kept last time, not every key of the window; what it
+        keeps is the same as `{k for k in latest if not (k[1] < horizon_ns and k not in current)}`
+        (tests/test_publication.py). At 10k measurements/s the window holds ~20 000 keys and
+        forgetting each frees an Estimate (~2 us): run often, each run frees only what is due. (A
+        horizon never moves back: `horizon_ns - _pruned_at < every_ns` returns before.)"""
         if horizon_ns is None or (self._pruned_at is not None and horizon_ns - self._pruned_at < every_ns):
             return
         self._pruned_at = horizon_ns
-        current = self._current(tracks)
-        for k in [k for k in self.latest if k[1] < horizon_ns and k not in current]:
-            del self.latest[k]
+        due, latest = self._due, self.latest
+        times = [t for t in due if t < horizon_ns]
+        if times or self._kept:
+            current = self._current(tracks)
+            kept: list[EstimateKey] = []
+            for k in itertools.chain(self._kept, *(due.pop(t) for t in times)):
+                if k in current:
+                    kept.append(k)
+                else:
+                    del latest[k]
+            self._kept = kept
         live = {int(i) for i in tracks.ids.tolist()}
         for tid in [t for t, last in self.tracks.items() if last < horizon_ns and t not in live]:
             del self.tracks[tid]
