@@ -317,14 +317,17 @@ class RecordingConfig(Section):
     Retention: the oldest files are deleted while more than `keep_files` recordings are kept or
     all of them take more than `keep_mb` (0: no limit). A recording or stream that fails while
     the service runs (disk full, folder gone) stops; tracking and publishing go on, and the
-    status says why (fusion.io.recording_guard, fusion.io.stream_rotation)."""
+    status says why (fusion.io.recording_guard, fusion.io.stream_rotation).
+    `flush_interval_s`: the record is written on the service's loop, which waits for it: at 10k
+    measurements/s a flush of 0.5 s of rows held the loop for ~20-50 ms (BENCHMARKS.md), so it is
+    written every 0.2 s, in smaller pieces (the same rows)."""
 
     enabled: bool = True
     directory: str = "recordings"
     prefix: str = "fusion"
     rotate_mb: Annotated[float, msgspec.Meta(gt=0.0)] = 512.0
     rotate_s: Annotated[float, msgspec.Meta(gt=0.0)] = 3600.0
-    flush_interval_s: Annotated[float, msgspec.Meta(gt=0.0, le=60.0)] = 0.5
+    flush_interval_s: Annotated[float, msgspec.Meta(gt=0.0, le=60.0)] = 0.2
     stream: bool = True
     keep_files: Annotated[int, msgspec.Meta(ge=0)] = 0
     keep_mb: NonNegFloat = 10_000.0

@@ -24,7 +24,7 @@ class RotatingSink:
 
     def __init__(
         self, directory: str | Path, *, prefix: str, layout: tuple[str, ...], position_indices: tuple[int, ...],
-        velocity_indices: tuple[int, ...], rotate_bytes: int, rotate_s: float, flush_interval_s: float = 0.5,
+        velocity_indices: tuple[int, ...], rotate_bytes: int, rotate_s: float, flush_interval_s: float = 0.2,
         meta: Mapping[str, Any] | None = None, counts: Callable[[], Mapping[str, int]] | None = None,
         clock: Callable[[], float] = time.time,
     ) -> None:

@@ -86,7 +86,7 @@ class RerunSink:
     def __init__(
         self, path: str | Path, *, layout: tuple[str, ...], position_indices: tuple[int, ...],
         velocity_indices: tuple[int, ...], recording_id: str = "fusion", application_id: str = "fusion",
-        flush_rows: int = 200_000, flush_interval_s: float = 0.5, view_interval_s: float = VIEW_INTERVAL_S,
+        flush_rows: int = 200_000, flush_interval_s: float = 0.2, view_interval_s: float = VIEW_INTERVAL_S,
         view_rows_max: int = VIEW_ROWS_MAX,
         meta: Mapping[str, Any] | None = None, counts: Callable[[], Mapping[str, int]] | None = None,
         run_id: str | None = None,
