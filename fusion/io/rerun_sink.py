@@ -78,6 +78,12 @@ VIEW_INTERVAL_S = 15.0
 # at 10k estimates/s, world/estimates every 2 s (one send_columns call, ~0.3 ms); the viewed
 # tracks' own entities (a track's rows in 15 s) never get there.
 VIEW_ROWS_MAX = 20_000
+# A view flush's entities (~130: the viewed tracks' series, trails, counts, the all-track points)
+# go out VIEW_SLICE per call of maybe_flush (one call per batch of the service's loop), not all in
+# the flush itself: at 10k measurements/s sending them at once held the loop for 74-100 ms every
+# view flush, and the scans behind it waited. The same rows and chunks; flush() and close() send
+# what is still waiting.
+VIEW_SLICE = 16
 
 
 class RerunSink:
@@ -87,7 +93,7 @@ class RerunSink:
         self, path: str | Path, *, layout: tuple[str, ...], position_indices: tuple[int, ...],
         velocity_indices: tuple[int, ...], recording_id: str = "fusion", application_id: str = "fusion",
         flush_rows: int = 200_000, flush_interval_s: float = 0.2, view_interval_s: float = VIEW_INTERVAL_S,
-        view_rows_max: int = VIEW_ROWS_MAX,
+        view_rows_max: int = VIEW_ROWS_MAX, view_slice: int = VIEW_SLICE,
         meta: Mapping[str, Any] | None = None, counts: Callable[[], Mapping[str, int]] | None = None,
         run_id: str | None = None,
     ) -> None:
@@ -115,6 +121,8 @@ class RerunSink:
         self._last_flush = self._last_view_flush = time.monotonic()
         self._view_interval = view_interval_s
         self._view_rows_max = view_rows_max
+        self._view_slice = view_slice
+        self._waiting: dict[str, Column] = {}  # a view flush's entities not sent yet (VIEW_SLICE per call)
         self._step = 0
         self._counts = counts
         self._newest_t = 0
@@ -242,6 +250,13 @@ class RerunSink:
         now = time.monotonic()
         if self._pending >= self._flush_rows or now - self._last_flush >= self._interval:
             self._flush(views=now - self._last_view_flush >= self._view_interval, final=False)
+        elif self._waiting:
+            self._send({k: self._waiting.pop(k) for k in sorted(self._waiting)[:self._view_slice]})
+
+    @property
+    def waiting(self) -> int:
+        """Entities of the last view flush not written yet (maybe_flush writes VIEW_SLICE per call)."""
+        return len(self._waiting)
 
     def flush(self) -> None:
         """Derive the rows of the kept estimates and write every pending row as columns."""
@@ -298,11 +313,25 @@ class RerunSink:
             self.rows.views(batches, self)
             if ends:
                 self.rows.mark_ends(self)
+            self._send(self._waiting)  # what the last view flush left goes out before the new rows
+            self._waiting = {}
             cols, self._cols = self._cols, {}
+            if not final:  # the record now, the views' entities VIEW_SLICE per maybe_flush
+                later = sorted(k for k in cols if not _of_record(k))[self._view_slice:]
+                self._waiting = {k: cols.pop(k) for k in later}
             self._last_view_flush = time.monotonic()
         else:
             due = [k for k, c in self._cols.items() if _of_record(k) or len(c) >= self._view_rows_max]
             cols = {k: self._cols.pop(k) for k in due}
+        self._send(cols)
+        self._pending = 0
+        self.flushes += 1
+        if views and not self._waiting:
+            self._send_blueprint()
+        self._last_flush = time.monotonic()
+
+    def _send(self, cols: dict[str, Column]) -> None:
+        """One send_columns call per entity (in name order), its series style first."""
         if cols and self._epoch is None:
             firsts = [c.first_times() for c in cols.values() if len(c)]
             self._epoch = bool(firsts) and is_epoch(min(f[0] for f in firsts))
@@ -321,11 +350,8 @@ class RerunSink:
             self.rec.send_columns(entity, indexes=idx, columns=components(rr, c), strict=True)
             self.rows_written += len(c)
             self._written.add("/" + entity)
-        self._pending = 0
-        self.flushes += 1
-        if views or len(self._written) != n_written:
+        if len(self._written) != n_written and not self._waiting:  # once the view flush is all out
             self._send_blueprint()
-        self._last_flush = time.monotonic()
 
     def _style(self, entity: str, c: Column) -> None:
         """Series names and colours, once per entity (static)."""

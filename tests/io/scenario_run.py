@@ -48,7 +48,8 @@ def latest(results: list[StepResult]) -> dict[tuple[int, int, str], Estimate]:
 
 def record_scenario(name: str, path, *, duration_s: float | None = None, batch: int = 50,
                     shuffle_seed: int | None = None, flush_rows: int = 200_000, flush_interval_s: float = 0.5,
-                    view_interval_s: float | None = None, view_rows_max: int | None = None):
+                    view_interval_s: float | None = None, view_rows_max: int | None = None,
+                    view_slice: int | None = None):
     """The reference scenario `name` (configs/scenarios/<name>.toml) as the service runs it: its
     stream of samples (measurements and truth) through the Pipeline with a RerunSink writing
     `path` (flushed as the arguments say; view_interval_s, view_rows_max None: the sink's defaults), `batch`
@@ -59,7 +60,7 @@ def record_scenario(name: str, path, *, duration_s: float | None = None, batch: 
 
     from fusion.io import wire
     from fusion.io.gain_groups import measured_components
-    from fusion.io.rerun_sink import VIEW_INTERVAL_S, VIEW_ROWS_MAX, RerunSink
+    from fusion.io.rerun_sink import VIEW_INTERVAL_S, VIEW_ROWS_MAX, VIEW_SLICE, RerunSink
     from fusion.pipeline import Pipeline
     from publishers.spec import load_scenario_file, scenario_path
     from publishers.stream import build_stream
@@ -75,7 +76,8 @@ def record_scenario(name: str, path, *, duration_s: float | None = None, batch: 
                      counts=lambda: pipe.counts().flat(),  # type: ignore[union-attr]
                      flush_rows=flush_rows, flush_interval_s=flush_interval_s,
                      view_interval_s=VIEW_INTERVAL_S if view_interval_s is None else view_interval_s,
-                     view_rows_max=VIEW_ROWS_MAX if view_rows_max is None else view_rows_max)
+                     view_rows_max=VIEW_ROWS_MAX if view_rows_max is None else view_rows_max,
+                     view_slice=VIEW_SLICE if view_slice is None else view_slice)
     pipe = Pipeline(tracker, wire.Codec(sf.service.namespace), sink=sink)
     records = [(s.arrival_ns, s.key, s.payload) for s in samples]
     if shuffle_seed is not None:
