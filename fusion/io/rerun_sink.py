@@ -14,7 +14,8 @@ estimates' and measurements' points and the events, at high rates; so a view flu
 converts 15 s of them at once, which was a +30-90 MB step of resident memory at 10k
 measurements/s); a view flush writes the record at once and the views' entities VIEW_SLICE per
 later call of maybe_flush (so the caller never waits for all ~130 at once; flush() and close()
-write what still waits): a killed writer loses at most view_interval_s of them, never more than
+write what still waits): a killed writer loses at most view_interval_s of them (and the few loop
+calls the slices take), never more than
 flush_interval_s of the record. Rows are kept as numpy blocks per entity (fusion.io.columns)
 and the viewed tracks' estimates as stacked arrays, so the per-track derivation runs once per
 view flush; what is kept is bounded by the viewed tracks' rows and the drawn points, not by the
