@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import subprocess
+import warnings
 from collections import Counter
 from pathlib import Path
 
@@ -86,13 +87,28 @@ def test_inspect_matches_own_computation(tmp_path: Path) -> None:
     assert json.loads(s.to_json())["nis"]["verdict"] in ("consistent", "too high", "too low")
 
 
+def _inside_a_frame(data: bytes, at: int, tmp: Path) -> int:
+    """The first cut at or after `at` that rerun's reader cannot read whole (a cut inside a frame,
+    not on a boundary between two: where frames end depends on the flushes' wall-clock cadence)."""
+    probe = tmp / "probe.rrd"
+    for cut in range(at, len(data)):
+        probe.write_bytes(data[:cut])
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")  # "no footer": every cut has none
+                list(RrdReader(str(probe)).stream())
+        except RuntimeError:
+            return cut
+    raise AssertionError(f"no cut inside a frame after byte {at}")
+
+
 @pytest.mark.parametrize("cut", ["footer", "mid_frame"], ids=["no-footer", "cut-mid-frame"])
 def test_inspect_reads_damaged_files(tmp_path: Path, cut: str) -> None:
     path = tmp_path / "run.rrd"
     _record(path)
     data = path.read_bytes()
     bad = tmp_path / "bad.rrd"
-    bad.write_bytes(data[:-16] if cut == "footer" else data[: len(data) * 2 // 3])
+    bad.write_bytes(data[:-16] if cut == "footer" else data[: _inside_a_frame(data, len(data) * 2 // 3, tmp_path)])
     s = summarise(bad)
     assert not s.complete
     assert s.tracks, "nothing recovered"
