@@ -157,7 +157,8 @@ class Service:
         )
         if recording_path is not None:
             self.sink = RerunSink(recording_path, recording_id=Path(recording_path).stem,
-                                  flush_interval_s=rc.flush_interval_s, **common)
+                                  flush_interval_s=rc.flush_interval_s, write_interval_s=rc.write_interval_s,
+                                  **common)
         elif rc.enabled:
             self.sink = service_recording(rc, rdir, **common)
         rotating = self.sink if isinstance(self.sink, RotatingSink) else None

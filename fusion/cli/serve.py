@@ -68,6 +68,9 @@ def add(sub: Any, common: argparse.ArgumentParser) -> None:
 
 
 def serve(args: argparse.Namespace) -> int:
+    from fusion.io.allocator import settle_allocator
+
+    settle_allocator()  # before rerun is loaded: see fusion.io.allocator for the measured saw-tooth
     import msgspec
 
     from fusion.config import load_service_config

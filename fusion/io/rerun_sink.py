@@ -3,8 +3,12 @@ number of tracks.
 
 Rerun costs ~0.1-0.5 ms per `send_columns` call here, whatever its size, so rows are buffered and
 written with one call per entity, and the number of entities is bounded: the data of record are
-three all-track entities (record/*: one row per estimate, association or event), written every
-`flush_interval_s` (checked on each step), at `flush_rows` pending rows and at `flush()`/`close()`;
+three all-track entities (record/*: one row per estimate, association or event), scored every
+`flush_interval_s` (checked on each step; each flush's share of the loop's time stays small) and
+written every `write_interval_s` (the flush interval unless set), once an entity holds
+`write_rows` rows (WRITE_ROWS), at `flush_rows` rows held and at `flush()`/`close()`: each chunk
+written costs a row of the file's footer index, which Rerun holds in memory, dense over all of
+the file's columns, until the file closes (fusion.io.allocator);
 everything else (measured points, events as text, trails, truth, counts, OSPA/GOSPA, and the
 first MAX_VIEWED confirmed tracks' own entities, chosen by the data (fusion.io.viewed): their
 time series and cursor marks, ~15 each) is
@@ -16,7 +20,7 @@ measurements/s); a view flush writes the record at once and the views' entities 
 later call of maybe_flush (so the caller never waits for all ~130 at once; flush() and close()
 write what still waits): a killed writer loses at most view_interval_s of them (and the few loop
 calls the slices take), never more than
-flush_interval_s of the record. Rows are kept as numpy blocks per entity (fusion.io.columns)
+write_interval_s of the record. Rows are kept as numpy blocks per entity (fusion.io.columns)
 and the viewed tracks' estimates as stacked arrays, so the per-track derivation runs once per
 view flush; what is kept is bounded by the viewed tracks' rows and the drawn points, not by the
 estimates' covariances.
@@ -75,8 +79,13 @@ def _of_record(entity: str) -> bool:
 TRUTH_WAIT_NS = 2_000_000_000
 # The views are written every 15 s: Rerun costs ~0.1-0.5 ms per entity written and the views are
 # ~130 entities (6 tracks' series, counts, trails); every 5 s that was ~10 ms per second of CPU,
-# ~10 us per measurement at 1000 measurements/s. The record is written every flush_interval_s.
+# ~10 us per measurement at 1000 measurements/s. The record is written every write_interval_s.
 VIEW_INTERVAL_S = 15.0
+# A record entity is written once it holds this many rows, before write_interval_s if need be:
+# Rerun compresses chunks of up to ~5 000 estimate rows to ~176 bytes per row and larger ones to
+# ~200 (measured on the shipped configuration at 667 targets; uncompressed 318 either way), so the
+# fewer chunks of a longer interval would cost 10-20 % more bytes per measurement at 10k/s.
+WRITE_ROWS = 4096
 # An entity written at the view cadence goes out with the record once it holds this many rows:
 # at 10k estimates/s, world/estimates every 2 s (one send_columns call, ~0.3 ms); the viewed
 # tracks' own entities (a track's rows in 15 s) never get there.
@@ -95,7 +104,9 @@ class RerunSink:
     def __init__(
         self, path: str | Path, *, layout: tuple[str, ...], position_indices: tuple[int, ...],
         velocity_indices: tuple[int, ...], recording_id: str = "fusion", application_id: str = "fusion",
-        flush_rows: int = 200_000, flush_interval_s: float = 0.2, view_interval_s: float = VIEW_INTERVAL_S,
+        flush_rows: int = 200_000, flush_interval_s: float = 0.2, write_interval_s: float | None = None,
+        write_rows: int = WRITE_ROWS,
+        view_interval_s: float = VIEW_INTERVAL_S,
         view_rows_max: int = VIEW_ROWS_MAX, view_slice: int = VIEW_SLICE,
         meta: Mapping[str, Any] | None = None, counts: Callable[[], Mapping[str, int]] | None = None,
         run_id: str | None = None,
@@ -121,7 +132,9 @@ class RerunSink:
         self.rows_written = 0
         self._flush_rows = flush_rows
         self._interval = flush_interval_s
-        self._last_flush = self._last_view_flush = time.monotonic()
+        self._write_interval = flush_interval_s if write_interval_s is None else write_interval_s
+        self._write_rows = write_rows
+        self._last_flush = self._last_view_flush = self._last_write = time.monotonic()
         self._view_interval = view_interval_s
         self._view_rows_max = view_rows_max
         self._view_slice = view_slice
@@ -311,6 +324,7 @@ class RerunSink:
         if self._counts is not None and self._pending:
             for name, v in sorted(self._counts().items()):
                 self.col(f"counts/{name}", "scalars", width=1).add(self._newest_t, self._step, self._newest_t, v=[v])
+        write = views  # a view flush writes everything; otherwise the record on its own cadence
         if views:
             batches, self._scored = self._scored, []
             self.rows.views(batches, self)
@@ -324,8 +338,13 @@ class RerunSink:
                 self._waiting = {k: cols.pop(k) for k in later}
             self._last_view_flush = time.monotonic()
         else:
-            due = [k for k, c in self._cols.items() if _of_record(k) or len(c) >= self._view_rows_max]
+            held = [len(c) for k, c in self._cols.items() if _of_record(k)]
+            write = (sum(held) >= self._flush_rows or max(held, default=0) >= self._write_rows
+                     or time.monotonic() - self._last_write >= self._write_interval)
+            due = [k for k, c in self._cols.items() if (write and _of_record(k)) or len(c) >= self._view_rows_max]
             cols = {k: self._cols.pop(k) for k in due}
+        if write:
+            self._last_write = time.monotonic()
         self._send(cols)
         self._pending = 0
         self.flushes += 1

@@ -48,11 +48,12 @@ def latest(results: list[StepResult]) -> dict[tuple[int, int, str], Estimate]:
 
 def record_scenario(name: str, path, *, duration_s: float | None = None, batch: int = 50,
                     shuffle_seed: int | None = None, flush_rows: int = 200_000, flush_interval_s: float = 0.5,
+                    write_interval_s: float | None = None, write_rows: int | None = None,
                     view_interval_s: float | None = None, view_rows_max: int | None = None,
                     view_slice: int | None = None):
     """The reference scenario `name` (configs/scenarios/<name>.toml) as the service runs it: its
     stream of samples (measurements and truth) through the Pipeline with a RerunSink writing
-    `path` (flushed as the arguments say; view_interval_s, view_rows_max None: the sink's defaults), `batch`
+    `path` (flushed and written as the arguments say; view_interval_s, view_rows_max None: the sink's defaults), `batch`
     samples per ingest; with `shuffle_seed`, the measurements of each block of 40
     samples come in a seeded random order (more late arrivals; truth keeps its places). Returns the
     pipeline (its tracker and counts) after the sink is closed."""
@@ -60,7 +61,7 @@ def record_scenario(name: str, path, *, duration_s: float | None = None, batch: 
 
     from fusion.io import wire
     from fusion.io.gain_groups import measured_components
-    from fusion.io.rerun_sink import VIEW_INTERVAL_S, VIEW_ROWS_MAX, VIEW_SLICE, RerunSink
+    from fusion.io.rerun_sink import VIEW_INTERVAL_S, VIEW_ROWS_MAX, VIEW_SLICE, WRITE_ROWS, RerunSink
     from fusion.pipeline import Pipeline
     from publishers.spec import load_scenario_file, scenario_path
     from publishers.stream import build_stream
@@ -74,7 +75,8 @@ def record_scenario(name: str, path, *, duration_s: float | None = None, batch: 
                      velocity_indices=tracker.velocity_indices,
                      meta={"scenario": name, "measured": measured_components(tracker.sensors, tracker.layout)},
                      counts=lambda: pipe.counts().flat(),  # type: ignore[union-attr]
-                     flush_rows=flush_rows, flush_interval_s=flush_interval_s,
+                     flush_rows=flush_rows, flush_interval_s=flush_interval_s, write_interval_s=write_interval_s,
+                     write_rows=WRITE_ROWS if write_rows is None else write_rows,
                      view_interval_s=VIEW_INTERVAL_S if view_interval_s is None else view_interval_s,
                      view_rows_max=VIEW_ROWS_MAX if view_rows_max is None else view_rows_max,
                      view_slice=VIEW_SLICE if view_slice is None else view_slice)
