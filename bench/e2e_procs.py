@@ -31,14 +31,18 @@ def free_endpoint() -> str:
     return f"tcp/127.0.0.1:{free_tcp_port()}"
 
 
-def service_config(folder: Path, *, recording: bool) -> Path:
-    """configs/service.toml as shipped, or a copy with [recording] enabled = false."""
-    if recording:
+def service_config(folder: Path, *, recording: bool, recording_keys: dict[str, Any] | None = None) -> Path:
+    """configs/service.toml as shipped, or a copy with [recording] enabled = false, or with the
+    given [recording] keys set (an A/B of one setting: bench.recording_ab)."""
+    keys = dict(recording_keys or {}) | ({} if recording else {"enabled": False})
+    if not keys:
         return CONFIG
     text = CONFIG.read_text()
-    assert "\n[recording]\n" in text and "enabled" not in text.split("[recording]")[1], "unexpected service.toml"
-    path = folder / "service-norec.toml"
-    path.write_text(text.replace("\n[recording]\n", "\n[recording]\nenabled = false\n"))
+    section = text.split("\n[recording]\n")[1].split("\n[")[0] if "\n[recording]\n" in text else None
+    assert section is not None and not any(f"\n{k} " in "\n" + section for k in keys), "unexpected service.toml"
+    lines = "".join(f"{k} = {str(v).lower() if isinstance(v, bool) else repr(v)}\n" for k, v in sorted(keys.items()))
+    path = folder / "service-variant.toml"
+    path.write_text(text.replace("\n[recording]\n", "\n[recording]\n" + lines))
     return path
 
 
@@ -48,9 +52,10 @@ class ServiceProcess:
     of the estimates that calls `on_estimate(receive_ns, payload)`)."""
 
     def __init__(self, folder: Path, *, recording: bool, on_estimate: Any = None,
-                 start_timeout_s: float = 60.0) -> None:
+                 start_timeout_s: float = 60.0, recording_keys: dict[str, Any] | None = None) -> None:
         self.folder = folder
         self.recording = recording
+        self.recording_keys = recording_keys
         self.on_estimate = on_estimate
         self.start_timeout_s = start_timeout_s
         self.proc: subprocess.Popen[bytes] | None = None
@@ -76,7 +81,7 @@ class ServiceProcess:
         self.endpoint = free_endpoint()
         rec = self.folder / "recordings"
         rec.mkdir(exist_ok=True)
-        config = service_config(self.folder, recording=self.recording)
+        config = service_config(self.folder, recording=self.recording, recording_keys=self.recording_keys)
         cmd = [sys.executable, "-m", "fusion", "serve", "--config", str(config), "--listen", self.endpoint,
                "--recordings", str(rec)]
         self._log = open(self.folder / "serve.log", "ab")  # noqa: SIM115 (closed in _kill)

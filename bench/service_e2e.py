@@ -35,7 +35,8 @@ def _counts_add_up(c: m.Counts) -> bool:
 
 
 def throughput_run(pub: Publisher, folder: Path, *, n: int, targets: int, recording: bool, window_s: float,
-                   warm_deadline_s: float, after_warm_s: float) -> dict[str, Any]:
+                   warm_deadline_s: float, after_warm_s: float,
+                   recording_keys: dict[str, Any] | None = None) -> dict[str, Any]:
     """One blast of the prepared messages at a fresh service; see the module docstring. The
     service refreshes its status between batches (up to intake.batch_max = 5000 samples), so
     the window runs from the first refresh after 4T were applied (warm-up: births and
@@ -49,7 +50,7 @@ def throughput_run(pub: Publisher, folder: Path, *, n: int, targets: int, record
         estimates[0] += 1
 
     folder.mkdir()
-    with ServiceProcess(folder, recording=recording, on_estimate=on_estimate) as svc:
+    with ServiceProcess(folder, recording=recording, on_estimate=on_estimate, recording_keys=recording_keys) as svc:
         pub.call("connect", svc.endpoint)
         prime_s, base = prime(svc, pub, timeout_s=120.0)
         t_start = time.monotonic()
@@ -109,11 +110,13 @@ def throughput_run(pub: Publisher, folder: Path, *, n: int, targets: int, record
 
 
 def latency_run(pub: Publisher, folder: Path, *, rate: int, recording: bool, duration_s: float,
-                grace_s: float, warm_s: float = 2.0, seed: int = 7) -> dict[str, Any]:
+                grace_s: float, warm_s: float = 2.0, seed: int = 7,
+                recording_keys: dict[str, Any] | None = None) -> dict[str, Any]:
     got: list[tuple[int, bytes]] = []
     targets = round(rate / MSGS_PER_TARGET_S)
     folder.mkdir()
-    with ServiceProcess(folder, recording=recording, on_estimate=lambda t, p: got.append((t, p))) as svc:
+    with ServiceProcess(folder, recording=recording, on_estimate=lambda t, p: got.append((t, p)),
+                        recording_keys=recording_keys) as svc:
         pub.call("connect", svc.endpoint)
         _, base = prime(svc, pub, timeout_s=120.0)
         start_ns = time.time_ns() + 1_000_000_000

@@ -318,13 +318,15 @@ class RecordingConfig(Section):
     all of them take more than `keep_mb` (0: no limit). A recording or stream that fails while
     the service runs (disk full, folder gone) stops; tracking and publishing go on, and the
     status says why (fusion.io.recording_guard, fusion.io.stream_rotation).
-    `flush_interval_s`: the record is scored every 0.2 s on the service's loop, which waits for it:
-    a flush of 0.5 s of rows at 10k measurements/s took ~20-50 ms (BENCHMARKS.md).
-    `write_interval_s`: the scored rows go to the file every 1 s (or once an entity holds 4 096
-    rows), in fewer, larger chunks: Rerun keeps a row of the file's footer index per chunk in
-    memory until the file closes (fusion.io.allocator).
-    A killed service loses at most the last write_interval_s of the record (its raw input is in the
-    stream file)."""
+    `flush_interval_s`: the record is scored every 0.2 s, in small pieces: a flush of 0.5 s of rows
+    at 10k measurements/s took ~20-50 ms (BENCHMARKS.md). `write_interval_s`: the scored rows go to
+    the file every 1 s (or once an entity holds 4 096 rows), in fewer, larger chunks: Rerun keeps a
+    row of the file's footer index per chunk in memory until the file closes (fusion.io.allocator).
+    `background`: the recording is written on a thread of its own that works while the loop waits
+    for samples (fusion.io.sink_thread), so a flush does not hold back the scans behind it; false
+    writes it on the loop, which waits for each flush. A killed service loses at most the last
+    write_interval_s of the record, and what its thread had not written yet (at most ~10 s of rows,
+    usually none; its raw input is in the stream file)."""
 
     enabled: bool = True
     directory: str = "recordings"
@@ -333,6 +335,7 @@ class RecordingConfig(Section):
     rotate_s: Annotated[float, msgspec.Meta(gt=0.0)] = 3600.0
     flush_interval_s: Annotated[float, msgspec.Meta(gt=0.0, le=60.0)] = 0.2
     write_interval_s: Annotated[float, msgspec.Meta(gt=0.0, le=60.0)] = 1.0
+    background: bool = True
     stream: bool = True
     keep_files: Annotated[int, msgspec.Meta(ge=0)] = 0
     keep_mb: NonNegFloat = 10_000.0

@@ -273,6 +273,7 @@ class ServiceStatus(Base, tag="status", kw_only=True):
     zenoh: ZenohLink | None = None
     checkpoint: CheckpointStatus | None = None
     recording_error: str | None = None  # why the recording or the stream file stopped, if it did
+    recording_queue: int = 0  # rows handed to the recording's thread and not written yet (fusion.io.sink_thread)
 
 
 class Snapshot(Base, tag="snapshot", kw_only=True):

@@ -44,6 +44,7 @@ from fusion.io.intake_queue import IntakeLimits, IntakeQueue
 from fusion.io.recording import RotatingSink, service_recording
 from fusion.io.recording_guard import GuardedSink
 from fusion.io.rerun_sink import RerunSink
+from fusion.io.sink_thread import SinkThread
 from fusion.io.stream_rotation import Retention, RotatingStream
 from fusion.io.zenoh_advanced import RecoveringSubscription
 from fusion.io.zenoh_bus import connection_of, open_with_retry
@@ -80,6 +81,7 @@ class Service:
         self.sink: RotatingSink | RerunSink | None = None
         self.stream: RotatingStream | None = None
         self._guard: GuardedSink | None = None
+        self._writer: SinkThread | None = None  # the recording's thread ([recording] background)
         self._retention: Retention | None = None
         self._outputs = (recording_dir, recording_path, stream_path)  # files are created by open()
         self.pipeline = Pipeline(
@@ -153,8 +155,9 @@ class Service:
             meta={"namespace": self.ns, "sensors": sorted(self.tracker.sensors), "model": self.tracker.model_name,
                   "modes": mode_names(self.config.tracker),
                   "measured": measured_components(self.tracker.sensors, self.tracker.layout)},
-            counts=self._counts_for_recording,
         )
+        writer = SinkThread(counts=self._counts_for_recording) if rc.background else None
+        common["counts"] = self._counts_for_recording if writer is None else writer.counts
         if recording_path is not None:
             self.sink = RerunSink(recording_path, recording_id=Path(recording_path).stem,
                                   flush_interval_s=rc.flush_interval_s, write_interval_s=rc.write_interval_s,
@@ -170,7 +173,15 @@ class Service:
             self._retention = Retention(rdir, prefix=rc.prefix, keep_files=rc.keep_files,
                                         keep_bytes=int(rc.keep_mb * 1e6))
         self._guard = None if self.sink is None else GuardedSink(self.sink)
-        self.pipeline.sink = self._guard
+        if self._guard is not None and writer is not None:
+            writer.start(self._guard)
+            self._writer = writer
+        self.pipeline.sink = self._recording
+
+    @property
+    def _recording(self) -> SinkThread | GuardedSink | None:
+        """Where the pipeline and the loop send the recording's calls: its thread, or the guard."""
+        return self._writer if self._writer is not None else self._guard
 
     def _warm_up(self) -> None:
         """Before anything subscribes: the first call of a compiled kernel compiles it (about 20 s
@@ -201,7 +212,9 @@ class Service:
             self._resume()
             self._open_outputs()
         except BaseException:
-            if self.sink is not None:
+            if self._recording is not None:
+                self._recording.close()
+            elif self.sink is not None:
                 self.sink.close()
             self.session.close()
             self.session = None
@@ -281,6 +294,8 @@ class Service:
             while not self._stop.is_set():
                 if deadline is not None and time.monotonic() >= deadline:
                     break
+                if self._writer is not None and self._q:
+                    self._writer.loop_busy()  # the recording's thread waits for the loop's next pause
                 batch = self._drain_burst(batch_max)
                 if batch:
                     self._step(batch)
@@ -288,14 +303,16 @@ class Service:
                         self._refresh_status(force=True)
                         self._settled = self._processed + self._q.refused_total
                 else:
+                    if self._writer is not None:
+                        self._writer.loop_idle()
                     self._wake.wait(0.05)
                     self._wake.clear()
                     if not self._q and self._settled != self._processed + self._q.refused_total:
                         self._refresh_status(force=True)  # samples refused at the door since the last batch
                         self._settled = self._processed + self._q.refused_total
                 self.snapshots.answer_waiting()
-                if self._guard is not None:
-                    self._guard.maybe_flush()
+                if self._recording is not None:
+                    self._recording.maybe_flush()
                 if self._retention is not None:
                     self._retention.maybe_sweep(self._open_files())
                 if self.checkpoints is not None:
@@ -319,8 +336,8 @@ class Service:
             self._shutdown_dropped += len(left)
             log.warning("shutdown: drain deadline of %.1f s reached, %d queued samples dropped (counted as "
                         "'shutdown')", self.config.intake.drain_deadline_s, len(left))
-            if self._guard is not None:  # a row to flush, so that the final counts reach the recording
-                self._guard.log_text(0, f"shutdown: drain deadline reached, {len(left)} queued samples dropped",
+            if self._recording is not None:  # a row to flush, so that the final counts reach the recording
+                self._recording.log_text(0, f"shutdown: drain deadline reached, {len(left)} queued samples dropped",
                                      "WARN")
         if self.checkpoints is not None:
             self.checkpoints.write(self.tracker)
@@ -332,8 +349,8 @@ class Service:
         if self._track_pubs is not None:
             self._track_pubs.close()
             self._track_pubs = None
-        if self._guard is not None:
-            self._guard.close()
+        if self._recording is not None:
+            self._recording.close()
         if self.stream is not None:
             self.stream.close()
         if self._retention is not None:
@@ -388,6 +405,7 @@ class Service:
             "gaps": self._gaps(),
             "zenoh": self._link(),
             "recording_error": self._recording_error(),
+            "recording_queue": 0 if self._writer is None else self._writer.queued_rows,
             "checkpoint": None if self.checkpoints is None else self.checkpoints.status(),
         }
 
@@ -441,7 +459,8 @@ class Service:
             n = self._q.offered
             if n != last or self._q:
                 last, since = n, time.monotonic()
-            elif time.monotonic() - since >= quiet_s and self._settled >= n:
+            elif time.monotonic() - since >= quiet_s and self._settled >= n and (
+                    self._writer is None or self._writer.idle()):
                 return True
             time.sleep(0.01)
         return False

@@ -63,7 +63,9 @@ def format_status(st: m.ServiceStatus, namespace: str) -> str:
         f"  truth      {c.truth} samples",
         f"  tracks     {tracks}",
         f"  queue      {st.queue_depth} waiting",
-        "  recording  " + (f"{st.recording} ({size(st.recording_bytes)})" if st.recording else "off"),
+        "  recording  " + (f"{st.recording} ({size(st.recording_bytes)}"
+                           + (f"; {st.recording_queue} rows still to write" if st.recording_queue else "") + ")"
+                           if st.recording else "off"),
     ]
     if st.recording_error:
         lines.append(f"  recording  FAILED: {st.recording_error} (tracking and publishing go on)")

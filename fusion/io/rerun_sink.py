@@ -141,6 +141,7 @@ class RerunSink:
         self._waiting: dict[str, Column] = {}  # a view flush's entities not sent yet (VIEW_SLICE per call)
         self._step = 0
         self._counts = counts
+        self._counts_written: list[tuple[str, int]] = []  # the counts of the last counts rows
         self._newest_t = 0
         self._horizon_ns: int | None = None  # the newest StepResult.horizon_ns: rows before it are final
         self._epoch: bool | None = None  # t is an epoch time (decided from the first rows)
@@ -321,9 +322,13 @@ class RerunSink:
         scored = self.rows.score(E, t_est, arr_e, stp_e, self, horizon_ns=horizon)
         if scored is not None:
             self._scored.append(scored)
-        if self._counts is not None and self._pending:
-            for name, v in sorted(self._counts().items()):
-                self.col(f"counts/{name}", "scalars", width=1).add(self._newest_t, self._step, self._newest_t, v=[v])
+        if self._counts is not None and (self._pending or final):
+            counts = sorted(self._counts().items())
+            if self._pending or counts != self._counts_written:  # the final counts always reach the file
+                for name, v in counts:
+                    self.col(f"counts/{name}", "scalars", width=1).add(self._newest_t, self._step, self._newest_t,
+                                                                       v=[v])
+                self._counts_written = counts
         write = views  # a view flush writes everything; otherwise the record on its own cadence
         if views:
             batches, self._scored = self._scored, []

@@ -91,7 +91,7 @@ def encode_status(status: dict[str, Any]) -> bytes:
         gaps={k: m.SeqGapStats(**v) for k, v in status.get("gaps", {}).items()},
         zenoh=m.ZenohLink(**status["zenoh"]) if status.get("zenoh") else None,
         checkpoint=m.CheckpointStatus(**status["checkpoint"]) if status.get("checkpoint") else None,
-        recording_error=status.get("recording_error"),
+        recording_error=status.get("recording_error"), recording_queue=status.get("recording_queue", 0),
     )
     return m.encode(msg)
 

@@ -58,6 +58,8 @@ def test_status_text() -> None:
     assert text.splitlines()[0] == "fusion service on namespace 'demo', up 2 min 5 s"
     assert "received 10 measurements: 9 applied, 1 duplicates dropped, 0 refused; published 7 estimates" in text
     assert "2 confirmed, 1 tentative" in text and "r.rrd (2.0 MB)" in text
+    behind = format_status(msgspec.structs.replace(st, recording_queue=1234), "demo")
+    assert "r.rrd (2.0 MB; 1234 rows still to write)" in behind
 
 
 def test_status_text_says_what_failed_and_what_was_resumed() -> None:

@@ -50,18 +50,22 @@ def record_scenario(name: str, path, *, duration_s: float | None = None, batch: 
                     shuffle_seed: int | None = None, flush_rows: int = 200_000, flush_interval_s: float = 0.5,
                     write_interval_s: float | None = None, write_rows: int | None = None,
                     view_interval_s: float | None = None, view_rows_max: int | None = None,
-                    view_slice: int | None = None):
+                    view_slice: int | None = None, background: bool = False):
     """The reference scenario `name` (configs/scenarios/<name>.toml) as the service runs it: its
     stream of samples (measurements and truth) through the Pipeline with a RerunSink writing
     `path` (flushed and written as the arguments say; view_interval_s, view_rows_max None: the sink's defaults), `batch`
     samples per ingest; with `shuffle_seed`, the measurements of each block of 40
-    samples come in a seeded random order (more late arrivals; truth keeps its places). Returns the
-    pipeline (its tracker and counts) after the sink is closed."""
+    samples come in a seeded random order (more late arrivals; truth keeps its places); with
+    `background`, the sink behind the service's recording thread (fusion.io.sink_thread, the loop's
+    counts taken before every call). Returns the pipeline (its tracker and counts) after the sink is
+    closed."""
     import msgspec
 
     from fusion.io import wire
     from fusion.io.gain_groups import measured_components
+    from fusion.io.recording_guard import GuardedSink
     from fusion.io.rerun_sink import VIEW_INTERVAL_S, VIEW_ROWS_MAX, VIEW_SLICE, WRITE_ROWS, RerunSink
+    from fusion.io.sink_thread import SinkThread
     from fusion.pipeline import Pipeline
     from publishers.spec import load_scenario_file, scenario_path
     from publishers.stream import build_stream
@@ -71,16 +75,19 @@ def record_scenario(name: str, path, *, duration_s: float | None = None, batch: 
     samples, _ = build_stream(spec, namespace=sf.service.namespace)
     tracker = Tracker(sf.service.tracker)
     pipe: Pipeline | None = None
+    writer = SinkThread(counts=lambda: pipe.counts().flat(), counts_every_s=0.0) if background else None  # type: ignore[union-attr]
     sink = RerunSink(path, recording_id=name, layout=tracker.layout, position_indices=tracker.position_indices,
                      velocity_indices=tracker.velocity_indices,
                      meta={"scenario": name, "measured": measured_components(tracker.sensors, tracker.layout)},
-                     counts=lambda: pipe.counts().flat(),  # type: ignore[union-attr]
+                     counts=writer.counts if writer is not None else lambda: pipe.counts().flat(),  # type: ignore[union-attr]
                      flush_rows=flush_rows, flush_interval_s=flush_interval_s, write_interval_s=write_interval_s,
                      write_rows=WRITE_ROWS if write_rows is None else write_rows,
                      view_interval_s=VIEW_INTERVAL_S if view_interval_s is None else view_interval_s,
                      view_rows_max=VIEW_ROWS_MAX if view_rows_max is None else view_rows_max,
                      view_slice=VIEW_SLICE if view_slice is None else view_slice)
-    pipe = Pipeline(tracker, wire.Codec(sf.service.namespace), sink=sink)
+    if writer is not None:
+        writer.start(GuardedSink(sink))
+    pipe = Pipeline(tracker, wire.Codec(sf.service.namespace), sink=writer if writer is not None else sink)
     records = [(s.arrival_ns, s.key, s.payload) for s in samples]
     if shuffle_seed is not None:
         rng = np.random.default_rng(shuffle_seed)
@@ -95,7 +102,7 @@ def record_scenario(name: str, path, *, duration_s: float | None = None, batch: 
         for i in range(0, len(records), batch):
             pipe.ingest(records[i:i + batch])
     finally:
-        sink.close()
+        (writer if writer is not None else sink).close()
         pipe.warn.flush()  # its held-back warnings now, not in another test's flush_all
     return pipe
 

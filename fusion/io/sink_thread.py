@@ -1,0 +1,208 @@
+"""The recording on a thread of its own: the service's loop hands each call over and goes on.
+
+Every call the pipeline and the loop make on the recording (log_step, log_truth, log_text,
+maybe_flush, close) is queued, in order, for one writer thread that makes it on the sink
+(fusion.io.recording_guard.GuardedSink over a RerunSink or a RotatingSink): the sink sees the
+same calls in the same order as when the loop made them itself, so the file holds the same rows;
+what changes is who waits. The record flush (scoring, step rows, Rerun's columns: ~24 ms every
+0.2 s at 10k measurements/s, BENCHMARKS.md) and the view flush no longer stop the loop.
+
+The two threads share the GIL, so a flush running while the loop handles a scan would slow the
+scan down as much as it did on the loop: the writer waits while the loop is busy (`loop_busy()`
+when samples are queued, `loop_idle()` when the loop is about to wait for more), before each call,
+for at most `max_defer_s` in all per round of the calls it takes, so its work falls in the gaps
+between scans; Rerun's encoding and file writing
+release the GIL, so part of it runs on the other core whenever it runs. A loop that is never
+idle (a backlog) still has its recording written every max_defer_s.
+
+Bounded: at most `max_rows` rows (estimates, associations, truth samples, texts) wait in the
+queue; a loop that gets that far ahead waits for the writer (counted in `waits`), so nothing is
+dropped and memory stays bounded. The counts the recording writes (its `counts/*` series) are
+the loop's, taken at most every `counts_every_s` and at close and queued with the calls, so the
+writer writes counts as of a step it has already logged (`counts()`, the sink's counts callback).
+The loop's own maybe_flush (between batches, and every 50 ms when idle) is queued like the rest,
+so the file keeps its cadence when no sample comes, and the sink sees exactly the calls it saw
+when the loop made them.
+
+Errors: the guard turns the sink's OSError and RuntimeError into a stopped recording (its
+`error`), as before; any other exception (a bug) stops the writer and is raised again on the
+loop's thread at its next call, as it would have been raised there before. `close()` queues the
+close, waits for the writer to finish it and raises what it raised.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections import deque
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from fusion.io.recording_guard import GuardedSink
+from fusion.tracking.results import StepResult
+
+MAX_ROWS = 50_000  # ~2.5 s of rows at 10k measurements/s (an estimate and an association each)
+COUNTS_EVERY_S = 0.1  # the loop's counts, taken at most this often (half the record's flush interval)
+MAX_DEFER_S = 0.25  # the longest the writer waits for the loop to go idle
+
+
+class SinkThread:
+    """See the module docstring. Build, give the sink `counts=writer.counts`, then `start(guard)`."""
+
+    def __init__(self, *, counts: Callable[[], Mapping[str, int]] | None = None, max_rows: int = MAX_ROWS,
+                 counts_every_s: float = COUNTS_EVERY_S, max_defer_s: float = MAX_DEFER_S) -> None:
+        self._source = counts
+        self._max_rows = max_rows
+        self._counts_every_s = counts_every_s
+        self._max_defer_s = max_defer_s
+        self._loop_idle = threading.Event()
+        self._loop_idle.set()
+        self._counts: Mapping[str, int] = {}  # the writer's: as of the last call it made
+        self._counts_at = -float("inf")
+        self._cv = threading.Condition(threading.Lock())
+        self._calls: deque[tuple[int, Callable[..., None], tuple, dict[str, Any]]] = deque()
+        self._held = 0  # rows queued or under way
+        self._taken = 0  # calls taken by the writer and not made yet
+        self._failure: BaseException | None = None
+        self._closing = False
+        self._thread: threading.Thread | None = None
+        self._guard: GuardedSink | None = None
+        self.waits = 0  # times the loop waited for room in the queue
+        self.calls = 0  # calls made on the sink
+
+    # ---- the loop's side ---------------------------------------------------------------------------
+    def start(self, guard: GuardedSink) -> None:
+        self._guard = guard
+        self._thread = threading.Thread(target=self._run, name="fusion-recording", daemon=True)
+        self._thread.start()
+
+    @property
+    def path(self) -> Path:
+        return self._guard.path  # type: ignore[union-attr]
+
+    @property
+    def error(self) -> str | None:
+        """Why the recording stopped (the guard's), None while it records."""
+        return None if self._guard is None else self._guard.error
+
+    def log_step(self, result: StepResult, *, arrival_ns: int | None = None) -> None:
+        rows = len(result.estimates) + len(result.associations) + len(result.events) + len(result.refused) + 1
+        self._put(rows, self._guard.log_step, (result,), {"arrival_ns": arrival_ns})  # type: ignore[union-attr]
+
+    def log_truth(self, target_id: str, t_ns: int, state: np.ndarray) -> None:
+        self._put(1, self._guard.log_truth, (target_id, t_ns, state))  # type: ignore[union-attr]
+
+    def log_text(self, t_ns: int, text: str, level: str = "INFO") -> None:
+        self._put(1, self._guard.log_text, (t_ns, text, level))  # type: ignore[union-attr]
+
+    def maybe_flush(self) -> None:
+        """The loop's call between batches (the sink's cadence: fusion.io.rerun_sink), queued."""
+        self._put(0, self._guard.maybe_flush, ())  # type: ignore[union-attr]
+
+    def loop_busy(self) -> None:
+        """The loop has samples to handle: the writer waits (at most max_defer_s)."""
+        if self._loop_idle.is_set():
+            self._loop_idle.clear()
+
+    def loop_idle(self) -> None:
+        """The loop is about to wait for samples: the writer's turn."""
+        if not self._loop_idle.is_set():
+            self._loop_idle.set()
+
+    @property
+    def queued_rows(self) -> int:
+        """Rows handed over and not written yet (the service's status)."""
+        return self._held
+
+    def idle(self) -> bool:
+        """Nothing queued and no call under way."""
+        with self._cv:
+            return not self._calls and not self._taken
+
+    def close(self) -> None:
+        """Queue the close (with the final counts), wait for the writer to make it; raise what the
+        writer raised."""
+        if self._thread is None:
+            return
+        self.loop_idle()
+        if self._thread.is_alive():
+            self._take_counts()
+            self._put(0, self._close, ())
+            self._thread.join()
+        self._thread = None
+        self._raise_failure()
+
+    def _put(self, rows: int, call: Callable[..., None], args: tuple, kw: dict[str, Any] | None = None) -> None:
+        self._raise_failure()
+        if self._source is not None and time.monotonic() - self._counts_at >= self._counts_every_s:
+            self._take_counts()
+        self._enqueue(rows, call, args, kw or {})
+
+    def _take_counts(self) -> None:
+        """The loop's counts now, queued: as of the calls queued before (the sink writes them
+        when it flushes after those calls)."""
+        if self._source is None:
+            return
+        self._counts_at = time.monotonic()
+        self._enqueue(0, self._set_counts, (dict(self._source()),), {})
+
+    def _enqueue(self, rows: int, call: Callable[..., None], args: tuple, kw: dict[str, Any]) -> None:
+        with self._cv:
+            while self._held and self._held + rows > self._max_rows and self._failure is None:
+                self.waits += 1
+                self.loop_idle()  # the loop waits: the writer's turn
+                self._cv.wait(0.5)
+            self._held += rows
+            self._calls.append((rows, call, args, kw))
+            if len(self._calls) == 1:
+                self._cv.notify_all()
+        self._raise_failure()
+
+    def _raise_failure(self) -> None:
+        if self._failure is not None:
+            raise self._failure
+
+    # ---- the writer's side -------------------------------------------------------------------------
+    def counts(self) -> Mapping[str, int]:
+        """The sink's counts callback (called on the writer's thread): as of the last call made."""
+        return self._counts
+
+    def _set_counts(self, snapshot: Mapping[str, int]) -> None:
+        self._counts = snapshot
+
+    def _close(self) -> None:
+        self._closing = True
+        self._guard.close()  # type: ignore[union-attr]
+
+    def _run(self) -> None:
+        try:
+            while not self._closing:
+                with self._cv:
+                    if not self._calls:
+                        self._cv.wait(0.5)
+                defer_until = time.monotonic() + self._max_defer_s  # this round's budget of waiting for the loop
+                self._loop_idle.wait(self._max_defer_s)
+                with self._cv:
+                    calls = list(self._calls)
+                    self._calls.clear()
+                    self._taken = len(calls)
+                for rows, call, args, kw in calls:
+                    if not self._loop_idle.is_set() and (left := defer_until - time.monotonic()) > 0:
+                        self._loop_idle.wait(left)  # the loop got busy meanwhile: wait again, within the budget
+                    call(*args, **kw)
+                    self.calls += 1
+                    with self._cv:
+                        self._held -= rows
+                        self._taken -= 1
+                        self._cv.notify_all()
+                    if self._closing:
+                        break
+        except BaseException as e:  # a bug in the recording: raised again on the loop's thread
+            self._failure = e
+            with self._cv:
+                self._calls.clear()
+                self._held = self._taken = 0
+                self._cv.notify_all()

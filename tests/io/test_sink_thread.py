@@ -1,0 +1,184 @@
+"""The recording's thread (fusion.io.sink_thread): the sink gets the same calls in the same order
+(a recording through it has the digest of one written on the loop), the loop waits only when
+max_rows rows are queued and loses none, the writer waits while the loop is busy (at most
+max_defer_s), a bug in the recording is raised on the loop's thread, a failing file stops the
+recording and nothing else, and the counts it writes are those of the calls it has made."""
+
+from __future__ import annotations
+
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from fusion.io.recording_guard import GuardedSink
+from fusion.io.sink_thread import SinkThread
+from fusion.tracking.results import StepResult
+from tests.io.recording_digest import digest
+from tests.io.scenario_run import maneuver_run, record_scenario
+
+
+class FakeSink:
+    """Notes every call (name, args, the counts the sink would write, wall time); optionally slow
+    or failing on log_step."""
+
+    def __init__(self, *, delay_s: float = 0.0, fail_at: int | None = None, error: type[BaseException] = ValueError,
+                 counts: Any = None) -> None:
+        self.path = Path("fake.rrd")
+        self.calls: list[tuple[str, Any, Any, float]] = []
+        self.delay_s = delay_s
+        self.fail_at = fail_at
+        self.error = error
+        self.counts = counts
+        self.closed = False
+
+    def _note(self, name: str, arg: Any) -> None:
+        self.calls.append((name, arg, None if self.counts is None else dict(self.counts()), time.monotonic()))
+
+    def log_step(self, result: StepResult, *, arrival_ns: int | None = None) -> None:
+        if self.fail_at is not None and len(self.calls) >= self.fail_at:
+            raise self.error("boom")
+        time.sleep(self.delay_s)
+        self._note("step", arrival_ns)
+
+    def log_truth(self, target_id: str, t_ns: int, state: Any) -> None:
+        self._note("truth", t_ns)
+
+    def log_text(self, t_ns: int, text: str, level: str = "INFO") -> None:
+        self._note("text", text)
+
+    def maybe_flush(self) -> None:
+        pass
+
+    def close(self) -> None:
+        self.closed = True
+
+
+def _results(n: int) -> list[StepResult]:
+    tr, dets, _ = maneuver_run(seed=3)
+    return [tr.process([d]) for d in dets[:n]]
+
+
+def test_a_recording_through_the_thread_is_the_one_written_on_the_loop(tmp_path: Path) -> None:
+    kw: dict[str, Any] = {"duration_s": 20.0, "flush_rows": 300, "flush_interval_s": 1e9, "view_interval_s": 1e9}
+    record_scenario("mix", tmp_path / "loop.rrd", **kw)
+    record_scenario("mix", tmp_path / "thread.rrd", background=True, **kw)
+    a, b = digest(tmp_path / "loop.rrd"), digest(tmp_path / "thread.rrd")
+    assert a == b
+    assert a["/record/estimates"]["rows"] > 500 and "/counts/applied" in a
+
+
+def test_calls_are_made_in_order_and_none_is_lost_when_the_loop_waits_for_room() -> None:
+    results = _results(40)
+    fake = FakeSink(delay_s=0.005)
+    w = SinkThread(max_rows=10)
+    w.start(GuardedSink(fake))
+    for k, r in enumerate(results):
+        w.log_step(r, arrival_ns=k)
+        w.log_truth("t", k, None)
+    w.close()
+    assert [(c[0], c[1]) for c in fake.calls] == [x for k in range(40) for x in (("step", k), ("truth", k))]
+    assert w.waits > 0, "the queue never filled: the test did not reach the bound"
+    assert fake.closed
+
+
+def test_the_writer_waits_while_the_loop_is_busy_and_goes_on_after_max_defer() -> None:
+    fake = FakeSink()
+    w = SinkThread(max_defer_s=0.6)
+    w.start(GuardedSink(fake))
+    w.loop_busy()
+    t0 = time.monotonic()
+    w.log_text(0, "while busy")
+    time.sleep(0.3)
+    assert fake.calls == [], "the writer ran while the loop was busy"
+    w.loop_idle()
+    deadline = time.monotonic() + 5.0
+    while not fake.calls and time.monotonic() < deadline:
+        time.sleep(0.005)
+    assert fake.calls and fake.calls[0][3] - t0 < 0.55, "not made as soon as the loop went idle"
+    w.loop_busy()  # busy for good: the writer goes on after max_defer_s
+    t1 = time.monotonic()
+    w.log_text(0, "busy for good")
+    while len(fake.calls) < 2 and time.monotonic() < deadline:
+        time.sleep(0.005)
+    assert len(fake.calls) == 2 and 0.5 <= fake.calls[1][3] - t1 < 2.0
+    w.close()
+
+
+def test_a_bug_in_the_recording_is_raised_on_the_loop_s_thread() -> None:
+    results = _results(5)
+    w = SinkThread()
+    w.start(GuardedSink(FakeSink(fail_at=2)))
+    with pytest.raises(ValueError, match="boom"):  # at a later call, or at close at the latest
+        for r in results:
+            w.log_step(r)
+            time.sleep(0.05)
+        w.close()
+    with pytest.raises(ValueError, match="boom"):
+        w.maybe_flush()
+
+
+def test_a_failing_file_stops_the_recording_only() -> None:
+    results = _results(5)
+    fake = FakeSink(fail_at=2, error=OSError)
+    w = SinkThread()
+    w.start(GuardedSink(fake))
+    for r in results:
+        w.log_step(r)
+    w.close()  # no exception: the guard took it
+    assert w.error is not None and "OSError: boom" in w.error
+    assert len(fake.calls) == 2 and not fake.closed  # every call after the failure is a no-op
+
+
+def test_the_counts_the_sink_sees_are_those_taken_before_its_call() -> None:
+    n = [0]
+    w = SinkThread(counts=lambda: {"applied": n[0]}, counts_every_s=0.0)
+    fake = FakeSink(delay_s=0.002, counts=w.counts)
+    w.start(GuardedSink(fake))
+    for k in range(30):
+        n[0] = k
+        w.log_text(0, str(k))
+    n[0] = 99
+    w.close()
+    assert [c[2]["applied"] for c in fake.calls] == list(range(30))
+
+
+def test_counts_are_taken_at_most_every_counts_every_s_and_at_close() -> None:
+    taken = []
+
+    def source() -> dict[str, int]:
+        taken.append(time.monotonic())
+        return {"applied": len(taken)}
+
+    w = SinkThread(counts=source, counts_every_s=10.0)
+    w.start(GuardedSink(FakeSink()))
+    for k in range(50):
+        w.log_text(0, str(k))
+        w.maybe_flush()
+    assert len(taken) == 1
+    w.close()
+    assert len(taken) == 2
+    assert w.counts() == {"applied": 2}
+
+
+def test_idle_is_true_once_every_call_is_made() -> None:
+    gate = threading.Event()
+
+    class Blocking(FakeSink):
+        def log_text(self, t_ns: int, text: str, level: str = "INFO") -> None:
+            gate.wait(5.0)
+            super().log_text(t_ns, text, level)
+
+    w = SinkThread()
+    w.start(GuardedSink(Blocking()))
+    w.log_text(0, "x")
+    time.sleep(0.05)
+    assert not w.idle()
+    gate.set()
+    deadline = time.monotonic() + 5.0
+    while not w.idle() and time.monotonic() < deadline:
+        time.sleep(0.005)
+    assert w.idle()
+    w.close()
