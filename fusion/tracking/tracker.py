@@ -10,6 +10,7 @@
                       the coarse-gate components of changed tracks and new detections;
                       the rest keeps its stored results, bit for bit      (replay)
             report its estimates and events as revisions of what it reported before
+                      (a step's withdrawals before its new events: withdrawals_first)
         commit the scans that fell behind the window                        (history, intake)
 
 Processing order is total: scans by (t_ns, sensor_id), detections of a scan by seq. So the
@@ -203,8 +204,8 @@ class Tracker:
             ts = out.after
         self._ts = ts
         self._commit()
-        return StepResult(tuple(estimates), tuple(events), tuple(refused), len(accepted), replays, tuple(assoc),
-                          tuple(points), self.horizon_ns)
+        return StepResult(tuple(estimates), withdrawals_first(events), tuple(refused), len(accepted), replays,
+                          tuple(assoc), tuple(points), self.horizon_ns)
 
     def _rerun(self, ts: TrackSet, key: ScanKey, dets: tuple[Detection, ...], prev: Entry | None,
                after: TrackSet | None, hint: Hint | None) -> Partial | None:
@@ -262,3 +263,15 @@ class Tracker:
             self.intake.commit(gone[-1].key)
         if self.inputs is not None and h is not None:
             self.intake.forget_inputs(self.inputs.forget_before(h))
+
+
+def withdrawals_first(events: list[TrackEvent]) -> tuple[TrackEvent, ...]:
+    """A step's events with its withdrawals first (each kind in its order). Two scans of the same
+    time (two sensors) can hand one event over: a replay runs the first again, which now confirms
+    the track, then the second, whose confirmation of it (the same event: kind, track, time,
+    reason) vanished. Reported in that order, a consumer that applies them one by one took the
+    event back after it came again (in the mix, a track that stayed confirmed lost its
+    "confirmed" in every subscriber); withdrawn first, it stands."""
+    if not any(ev.retracted for ev in events):
+        return tuple(events)
+    return tuple([ev for ev in events if ev.retracted] + [ev for ev in events if not ev.retracted])
