@@ -100,7 +100,7 @@ def replay(stream: str | Path, *, config: str | Path | None = None, out: str | P
             else:
                 chunk = all_records[i:i + batch]
             i += len(chunk)
-            res = pipe.ingest(chunk)
+            res = pipe.ingest(chunk, more=not realtime and i < len(all_records))  # a scan cut by the batch waits
             for e in res.to_publish:
                 n_est += 1
                 if est_file is not None:

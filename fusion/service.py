@@ -244,10 +244,12 @@ class Service:
         ic = self.config.intake
         return drain_burst(self._q, self._wake, limit, gap_s=ic.burst_gap_ms / 1e3, linger_s=ic.burst_linger_ms / 1e3)
 
-    def _step(self, batch: list[Record]) -> None:
+    def _step(self, batch: list[Record], *, more: bool = False) -> None:
+        """One batch: to the stream file, through the pipeline (`more`: a backlog follows, so the
+        batch's last scan waits for its rest: fusion.pipeline), out to Zenoh."""
         if self.stream is not None:
             self.stream.write_many(batch)
-        out = self.pipeline.ingest(batch)
+        out = self.pipeline.ingest(batch, more=more)
         self._processed += len(batch)
         enc = wire.estimate_encoder(self.tracker.layout, self.tracker.model_name)
         BLOCK = self._zenoh.CongestionControl.BLOCK
@@ -298,7 +300,7 @@ class Service:
                     self._writer.loop_busy()  # the recording's thread waits for the loop's next pause
                 batch = self._drain_burst(batch_max)
                 if batch:
-                    self._step(batch)
+                    self._step(batch, more=len(batch) >= batch_max and bool(self._q))
                     if not self._q:  # caught up: make the status answer current at once
                         self._refresh_status(force=True)
                         self._settled = self._processed + self._q.refused_total
@@ -331,6 +333,8 @@ class Service:
         deadline = time.monotonic() + self.config.intake.drain_deadline_s
         while self._q and time.monotonic() < deadline:
             self._step(self._drain(self.config.intake.batch_max))
+        if self.pipeline.holding:  # a scan waiting for a rest that is not coming
+            self._step([])
         left = self._drain(len(self._q)) if self._q else []
         if left:
             self._shutdown_dropped += len(left)
@@ -386,7 +390,7 @@ class Service:
             refused[reason] = refused.get(reason, 0) + n
         refused = dict(sorted(refused.items()))
         arrived = self._q.offered
-        queued = arrived - sum(intake.values()) - self._processed
+        queued = arrived - sum(intake.values()) - self._processed + self.pipeline.holding  # held: not yet applied
         counts = np.bincount(self.tracker.track_set.status, minlength=len(Status)).tolist()  # not a Track per row
         by_status = {s.label: counts[s] for s in Status if counts[s]}
         return {
