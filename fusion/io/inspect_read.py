@@ -89,7 +89,7 @@ class RunRecord:
                 self.sensors[ent.rsplit("/", 1)[1]] += sum(len(x) for x in b.column("Points3D:positions").to_pylist())
             elif ent.startswith("/counts/") and "Scalars:scalars" in names:
                 v = b.column("Scalars:scalars").to_pylist()
-                i = int(np.argmax(t))
+                i = len(t) - 1 - int(np.argmax(t[::-1]))  # the last row written at the newest time
                 name = ent[len("/counts/"):]
                 if name not in self.counts or int(t[i]) >= self.counts[name][0]:
                     self.counts[name] = (int(t[i]), int(v[i][0]))

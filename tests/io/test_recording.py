@@ -192,3 +192,25 @@ def test_inspect_cli_json(tmp_path: Path) -> None:
     text = subprocess.run([sys.executable, "-m", "fusion", "inspect", str(path)], capture_output=True, text=True,
                           timeout=120, cwd=Path(__file__).resolve().parents[2])
     assert "position RMSE against truth" in text.stdout and "complete" in text.stdout
+
+
+def test_the_final_counts_reach_the_file_and_inspect_reads_them(tmp_path: Path) -> None:
+    """Counts that change after the last rows (refusals at the door, or a recording thread's last
+    snapshot) are written at close, at the same time as the counts before them: inspect takes the
+    last row written at the newest time."""
+    from fusion.io.inspect import summarise
+    from fusion.io.rerun_sink import RerunSink
+
+    tr, dets, _ = maneuver_run(seed=3)
+    applied = [0]
+    sink = RerunSink(tmp_path / "c.rrd", layout=tr.layout, position_indices=tr.position_indices,
+                     velocity_indices=tr.velocity_indices, counts=lambda: {"applied": applied[0]},
+                     flush_interval_s=0.0, view_interval_s=1e9)  # a record flush (and a counts row) per step
+    for d in dets[:30]:
+        r = tr.process([d])
+        applied[0] += len(r.estimates)
+        sink.log_step(r)
+    written = applied[0]
+    applied[0] = written + 7  # nothing pending: only the close can say so, in the same chunk as the rows before
+    sink.close()
+    assert summarise(tmp_path / "c.rrd").counts["applied"] == written + 7
