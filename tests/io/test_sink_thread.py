@@ -86,7 +86,7 @@ def test_calls_are_made_in_order_and_none_is_lost_when_the_loop_waits_for_room()
 
 def test_the_writer_waits_while_the_loop_is_busy_and_goes_on_after_max_defer() -> None:
     fake = FakeSink()
-    w = SinkThread(max_defer_s=0.6)
+    w = SinkThread(max_defer_s=1.5)
     w.start(GuardedSink(fake))
     w.loop_busy()
     t0 = time.monotonic()
@@ -94,16 +94,16 @@ def test_the_writer_waits_while_the_loop_is_busy_and_goes_on_after_max_defer() -
     time.sleep(0.3)
     assert fake.calls == [], "the writer ran while the loop was busy"
     w.loop_idle()
-    deadline = time.monotonic() + 5.0
+    deadline = time.monotonic() + 8.0
     while not fake.calls and time.monotonic() < deadline:
         time.sleep(0.005)
-    assert fake.calls and fake.calls[0][3] - t0 < 0.55, "not made as soon as the loop went idle"
+    assert fake.calls and fake.calls[0][3] - t0 < 1.2, "not made as soon as the loop went idle"
     w.loop_busy()  # busy for good: the writer goes on after max_defer_s
     t1 = time.monotonic()
     w.log_text(0, "busy for good")
     while len(fake.calls) < 2 and time.monotonic() < deadline:
         time.sleep(0.005)
-    assert len(fake.calls) == 2 and 0.5 <= fake.calls[1][3] - t1 < 2.0
+    assert len(fake.calls) == 2 and 1.4 <= fake.calls[1][3] - t1 < 4.0
     w.close()
 
 
