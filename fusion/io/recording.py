@@ -27,13 +27,13 @@ class RotatingSink:
         velocity_indices: tuple[int, ...], rotate_bytes: int, rotate_s: float, flush_interval_s: float = 0.2,
         write_interval_s: float | None = None,
         meta: Mapping[str, Any] | None = None, counts: Callable[[], Mapping[str, int]] | None = None,
-        clock: Callable[[], float] = time.time,
+        clock: Callable[[], float] = time.time, pause: Callable[[], None] | None = None,
     ) -> None:
         self.directory = Path(directory)
         self.prefix = prefix
         self._kw = dict(layout=layout, position_indices=position_indices, velocity_indices=velocity_indices,
                         flush_interval_s=flush_interval_s, write_interval_s=write_interval_s, meta=meta, counts=counts,
-                        run_id=uuid.uuid4().hex)  # one run: every file of the set carries its id
+                        pause=pause, run_id=uuid.uuid4().hex)  # one run: every file of the set carries its id
         self.rotate_bytes = rotate_bytes
         self.rotate_s = rotate_s
         self._clock = clock
@@ -99,10 +99,12 @@ class RotatingSink:
 def service_recording(rc: RecordingConfig, directory: str | Path, *, layout: tuple[str, ...],
                       position_indices: tuple[int, ...], velocity_indices: tuple[int, ...],
                       meta: Mapping[str, Any] | None = None,
-                      counts: Callable[[], Mapping[str, int]] | None = None) -> RotatingSink:
+                      counts: Callable[[], Mapping[str, int]] | None = None,
+                      pause: Callable[[], None] | None = None) -> RotatingSink:
     """The rotating recording `fusion serve` writes for a [recording] section (rotation, flush
-    and write cadence), in `directory`: the one place it is built, for the service and bench.recording_cost."""
+    and write cadence), in `directory`: the one place it is built, for the service and bench.recording_cost.
+    `pause`: where the recording's thread may stop for the loop inside a flush (RerunSink)."""
     return RotatingSink(directory, prefix=rc.prefix, layout=layout, position_indices=position_indices,
                         velocity_indices=velocity_indices, rotate_bytes=int(rc.rotate_mb * 1e6),
                         rotate_s=rc.rotate_s, flush_interval_s=rc.flush_interval_s,
-                        write_interval_s=rc.write_interval_s, meta=meta, counts=counts)
+                        write_interval_s=rc.write_interval_s, meta=meta, counts=counts, pause=pause)

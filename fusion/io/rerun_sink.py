@@ -70,6 +70,10 @@ from fusion.io.viewed import FINAL
 from fusion.tracking.results import Estimate, StepResult
 
 
+def _no_pause() -> None:
+    """A flush's parts back to back (no thread of its own to share the GIL with)."""
+
+
 def _of_record(entity: str) -> bool:
     """Whether an entity is written at every record flush (record/*: the data of record), else
     at view flushes (everything drawn, the counts, the events as text)."""
@@ -109,7 +113,7 @@ class RerunSink:
         view_interval_s: float = VIEW_INTERVAL_S,
         view_rows_max: int = VIEW_ROWS_MAX, view_slice: int = VIEW_SLICE,
         meta: Mapping[str, Any] | None = None, counts: Callable[[], Mapping[str, int]] | None = None,
-        run_id: str | None = None,
+        run_id: str | None = None, pause: Callable[[], None] | None = None,
     ) -> None:
         import rerun as rr
 
@@ -141,6 +145,9 @@ class RerunSink:
         self._waiting: dict[str, Column] = {}  # a view flush's entities not sent yet (VIEW_SLICE per call)
         self._step = 0
         self._counts = counts
+        # called between the parts of a flush: where the recording's thread may stop for the
+        # service's loop (fusion.io.sink_thread.SinkThread.pause); nothing without one
+        self._pause: Callable[[], None] = pause if pause is not None else _no_pause
         self._counts_written: list[tuple[str, int]] = []  # the counts of the last counts rows
         self._newest_t = 0
         self._horizon_ns: int | None = None  # the newest StepResult.horizon_ns: rows before it are final
@@ -293,6 +300,7 @@ class RerunSink:
         derived and written at view flushes only: Rerun's per-entity cost and the per-track
         derivation are paid once per view_interval_s."""
         self._rows_of_steps()
+        self._pause()
         E, arr, stp = self._est
         self._est = ([], [], [])
         t_est = np.fromiter((e.t_ns for e in E), dtype=np.int64, count=len(E))
@@ -322,6 +330,7 @@ class RerunSink:
         scored = self.rows.score(E, t_est, arr_e, stp_e, self, horizon_ns=horizon)
         if scored is not None:
             self._scored.append(scored)
+        self._pause()
         if self._counts is not None and (self._pending or final):
             counts = sorted(self._counts().items())
             if self._pending or counts != self._counts_written:  # the final counts always reach the file
@@ -332,7 +341,7 @@ class RerunSink:
         write = views  # a view flush writes everything; otherwise the record on its own cadence
         if views:
             batches, self._scored = self._scored, []
-            self.rows.views(batches, self)
+            self.rows.views(batches, self, pause=self._pause)
             if ends:
                 self.rows.mark_ends(self)
             self._send(self._waiting)  # what the last view flush left goes out before the new rows
@@ -369,6 +378,7 @@ class RerunSink:
             c = cols[entity]
             if not len(c):
                 continue
+            self._pause()
             self._style(entity, c)
             t_ns, step, arrival_ns = c.times()
             idx = [time_column(rr, "t", t_ns, epoch=bool(self._epoch)),

@@ -13,7 +13,13 @@ when samples are queued, `loop_idle()` when the loop is about to wait for more),
 for at most `max_defer_s` in all per round of the calls it takes, so its work falls in the gaps
 between scans; Rerun's encoding and file writing
 release the GIL, so part of it runs on the other core whenever it runs. A loop that is never
-idle (a backlog) still has its recording written every max_defer_s.
+idle (a backlog) still has its recording written every max_defer_s. A flush is one call but
+many parts (scoring, the views' derivation, one send per entity: 20-70 ms in all at 10k
+measurements/s, longer than the ~25 ms between two scans), so the sink also stops at `pause()`
+between its parts (fusion.io.rerun_sink), within the same budget; and the loop's intake marks
+the loop busy as a sample arrives (`loop_busy()` from the Zenoh callback), not only when the
+loop next looks: a flush that ran on while a scan's burst came in held the GIL from the
+callbacks, the burst came in slowly, the loop took it in two batches and ran the scan twice.
 
 Bounded: at most `max_rows` rows (estimates, associations, truth samples, texts) wait in the
 queue; a loop that gets that far ahead waits for the writer (counted in `waits`), so nothing is
@@ -69,6 +75,7 @@ class SinkThread:
         self._failure: BaseException | None = None
         self._closing = False
         self._thread: threading.Thread | None = None
+        self._defer_until = 0.0  # the end of this round's budget of waiting for the loop
         self._guard: GuardedSink | None = None
         self.waits = 0  # times the loop waited for room in the queue
         self.calls = 0  # calls made on the sink
@@ -103,7 +110,8 @@ class SinkThread:
         self._put(0, self._guard.maybe_flush, ())  # type: ignore[union-attr]
 
     def loop_busy(self) -> None:
-        """The loop has samples to handle: the writer waits (at most max_defer_s)."""
+        """The loop has samples to handle (the loop, or the intake as one arrives): the writer
+        waits (at most max_defer_s per round), before its next call or at its next pause()."""
         if self._loop_idle.is_set():
             self._loop_idle.clear()
 
@@ -166,6 +174,16 @@ class SinkThread:
             raise self._failure
 
     # ---- the writer's side -------------------------------------------------------------------------
+    def pause(self) -> None:
+        """A point inside a call where the writer may stop for the loop (the sink calls it between
+        the parts of a flush): while the loop is busy, wait for it, within this round's budget.
+        A no-op on any other thread than the writer's."""
+        if threading.current_thread() is not self._thread or self._loop_idle.is_set():
+            return
+        left = self._defer_until - time.monotonic()
+        if left > 0:
+            self._loop_idle.wait(left)
+
     def counts(self) -> Mapping[str, int]:
         """The sink's counts callback (called on the writer's thread): as of the last call made."""
         return self._counts
@@ -183,15 +201,14 @@ class SinkThread:
                 with self._cv:
                     if not self._calls:
                         self._cv.wait(0.5)
-                defer_until = time.monotonic() + self._max_defer_s  # this round's budget of waiting for the loop
+                self._defer_until = time.monotonic() + self._max_defer_s  # this round's budget
                 self._loop_idle.wait(self._max_defer_s)
                 with self._cv:
                     calls = list(self._calls)
                     self._calls.clear()
                     self._taken = len(calls)
                 for rows, call, args, kw in calls:
-                    if not self._loop_idle.is_set() and (left := defer_until - time.monotonic()) > 0:
-                        self._loop_idle.wait(left)  # the loop got busy meanwhile: wait again, within the budget
+                    self.pause()  # the loop got busy meanwhile: wait again, within the budget
                     call(*args, **kw)
                     self.calls += 1
                     with self._cv:

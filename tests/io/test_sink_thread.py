@@ -182,3 +182,59 @@ def test_idle_is_true_once_every_call_is_made() -> None:
         time.sleep(0.005)
     assert w.idle()
     w.close()
+
+
+def test_the_writer_stops_at_a_pause_inside_a_call_while_the_loop_is_busy() -> None:
+    """A flush is one call of many parts; the sink calls pause() between them and the writer
+    waits there for the loop (within max_defer_s), not only between calls."""
+    in_call, go = threading.Event(), threading.Event()
+
+    class Parted(FakeSink):
+        pause: Any = None
+
+        def maybe_flush(self) -> None:
+            self._note("part 1", None)
+            in_call.set()
+            go.wait(5.0)
+            self.pause()
+            self._note("part 2", None)
+
+    fake = Parted()
+    w = SinkThread(max_defer_s=1.5)
+    fake.pause = w.pause
+    w.start(GuardedSink(fake))
+    w.maybe_flush()
+    assert in_call.wait(5.0)
+    w.loop_busy()  # a scan arrives while the writer is inside the call
+    go.set()
+    time.sleep(0.3)
+    assert [c[0] for c in fake.calls] == ["part 1"], "the writer went on with the call while the loop was busy"
+    t_idle = time.monotonic()
+    w.loop_idle()
+    deadline = time.monotonic() + 8.0
+    while len(fake.calls) < 2 and time.monotonic() < deadline:
+        time.sleep(0.005)
+    assert [c[0] for c in fake.calls] == ["part 1", "part 2"] and fake.calls[1][3] - t_idle < 1.0
+    # busy for good: the call goes on once the round's budget is spent
+    in_call.clear()
+    go.clear()
+    w.maybe_flush()
+    assert in_call.wait(5.0)
+    w.loop_busy()
+    t_busy = time.monotonic()
+    go.set()
+    while len(fake.calls) < 4 and time.monotonic() < deadline:
+        time.sleep(0.005)
+    assert len(fake.calls) == 4 and fake.calls[3][3] - t_busy < 4.0
+    w.close()
+
+
+def test_a_pause_on_any_other_thread_than_the_writer_s_returns_at_once() -> None:
+    w = SinkThread(max_defer_s=5.0)
+    w.start(GuardedSink(FakeSink()))
+    w.loop_busy()
+    t0 = time.monotonic()
+    w.pause()  # the loop's thread (a sink used without the writer's thread never waits)
+    assert time.monotonic() - t0 < 0.5
+    w.loop_idle()
+    w.close()
