@@ -20,7 +20,11 @@ time). Measured: the scans after the first WARM_S wall seconds of the recording-
 in the run without) up to the end, the final flush and close included (every row recorded is
 paid for; about MEASURED_S seconds: more than one view flush). A file's start (the sink's CPU
 time in its first WARM_S seconds) and its final flush and close (within the measured figure)
-are also shown in ms. Median [min, max] over the repeats.
+are also shown in ms. Also shown: the sink's CPU time per measurement in a file's steady state,
+from the first scan after the warm-up at which the recording's viewed tracks are all chosen
+(before that every confirmed track's rows are kept as a candidate's: fusion.io.viewed) to the
+last scan, the close left out (once per file; a service's file lives up to rotate_s).
+Median [min, max] over the repeats.
 """
 
 from __future__ import annotations
@@ -106,8 +110,10 @@ class _Timed:
 
 
 def _run(data: list, *, record: bool, tmp: Path) -> tuple[Any, int]:
-    """Cumulative (wall s, process CPU s, CPU s inside the sink) after each scan, (n_scans + 2, 3),
-    and the measurements applied; the last row after a recording's final flush and close."""
+    """Cumulative (wall s, process CPU s, CPU s inside the sink) after each scan, and whether the
+    recording's viewed tracks were all chosen by then (fusion.io.viewed: until then every
+    confirmed track's rows are kept as a candidate's), (n_scans + 2, 4), and the measurements
+    applied; the last row after a recording's final flush and close."""
     cfg = load_service_config(CONFIG)
     tr = Tracker(cfg.tracker)
     pipe = Pipeline(tr, wire.Codec(cfg.namespace))
@@ -120,17 +126,19 @@ def _run(data: list, *, record: bool, tmp: Path) -> tuple[Any, int]:
                   "modes": mode_names(cfg.tracker)})
         timed = _Timed(GuardedSink(rotating))
         pipe.sink = timed
-    marks = np.zeros((len(data) + 2, 3))
+    marks = np.zeros((len(data) + 2, 4))
     t0, c0 = time.perf_counter(), time.process_time()
     for k, recs in enumerate(data):
         pipe.ingest(recs)
         if timed is not None:
             timed.maybe_flush()
-        marks[k + 1] = (time.perf_counter() - t0, time.process_time() - c0, 0.0 if timed is None else timed.inside_s)
+        marks[k + 1] = (time.perf_counter() - t0, time.process_time() - c0, 0.0 if timed is None else timed.inside_s,
+                        timed is not None and not rotating.sink.rows.choice.open)
     if timed is not None:
         timed.close()
         assert timed.sink.error is None, timed.sink.error
-    marks[-1] = (time.perf_counter() - t0, time.process_time() - c0, 0.0 if timed is None else timed.inside_s)
+    marks[-1] = (time.perf_counter() - t0, time.process_time() - c0, 0.0 if timed is None else timed.inside_s,
+                 marks[-2, 3])
     return marks, tr.counts.applied
 
 
@@ -149,7 +157,8 @@ def run(*, quick: bool = False, sizes: tuple[int, ...] = (10, 100, 1000)) -> dic
           f"the service's rotating recording), truth of every target at every radar scan; median [min, max] of "
           f"{repeats} interleaved repeats")
     print(f"{'targets':>7} {'meas':>6} {'off us/meas':>12} {'on us/meas':>11} {'cost (wall) us/meas':>22} "
-          f"{'cost (CPU) us/meas':>22} {'in sink (CPU) us/meas':>22} {'close ms':>9} {'start ms':>9}")
+          f"{'cost (CPU) us/meas':>22} {'in sink (CPU) us/meas':>22} {'close ms':>9} {'start ms':>9} "
+          f"{'steady in sink us/meas':>22} {'its meas':>8}")
     with tempfile.TemporaryDirectory() as d:  # compiled kernels, imports, Rerun: loaded before any timing
         _run(batches(20, 2.0, ns=ns), record=True, tmp=Path(d))
     for n_targets in sizes:
@@ -161,7 +170,7 @@ def run(*, quick: bool = False, sizes: tuple[int, ...] = (10, 100, 1000)) -> dic
                 for record in (False, True):
                     runs[record].append(_run(data, record=record, tmp=Path(d) / f"r{k}"))
         meas = np.cumsum([0] + [sum(1 for _, key, _ in recs if "/truth/" not in key) for recs in data])
-        wall, cpu, ins, off_us, on_us, n_steady = [], [], [], [], [], []
+        wall, cpu, ins, off_us, on_us, n_steady, steady, n_chosen = [], [], [], [], [], [], [], []
         for (off, n_off), (on, n_on) in zip(runs[False], runs[True], strict=True):
             assert n_off == n_on == meas[-1], (n_off, n_on, meas[-1])  # every measurement applied, both ways
             k0 = int(np.searchsorted(on[:-1, 0], WARM_S))  # the first scan after the warm-up
@@ -176,15 +185,26 @@ def run(*, quick: bool = False, sizes: tuple[int, ...] = (10, 100, 1000)) -> dic
             off_us.append(d_off[0] / n * 1e6)
             on_us.append(d_on[0] / n * 1e6)
             n_steady.append(int(n))
+            # a file in its steady state: from the first scan after the warm-up with the viewed
+            # tracks all chosen to the last scan, the close left out (once per file)
+            chosen = np.flatnonzero(on[1:k1 + 1, 3] > 0)
+            if chosen.size:
+                j0 = max(k0, int(chosen[0]) + 1)
+                if j0 < k1 and meas[k1] > meas[j0]:
+                    steady.append((on[k1, 2] - on[j0, 2]) / (meas[k1] - meas[j0]) * 1e6)
+                    n_chosen.append(int(meas[k1] - meas[j0]))
         closing = [(on[-1, 2] - on[-2, 2]) * 1e3 for on, _ in runs[True]]
         warm = [on[int(np.searchsorted(on[:-1, 0], WARM_S)), 2] * 1e3 for on, _ in runs[True]]
 
         def spread(v: list[float]) -> str:
-            return f"{statistics.median(v):8.1f} [{min(v):.1f}, {max(v):.1f}]"
+            return f"{statistics.median(v):8.1f} [{min(v):.1f}, {max(v):.1f}]" if v else "-"
 
         print(f"{n_targets:>7} {statistics.median(n_steady):>6.0f} {statistics.median(off_us):12.1f} "
               f"{statistics.median(on_us):11.1f} {spread(wall):>22} {spread(cpu):>22} {spread(ins):>22} "
-              f"{statistics.median(closing):9.0f} {statistics.median(warm):9.0f}")
+              f"{statistics.median(closing):9.0f} {statistics.median(warm):9.0f} {spread(steady):>22} "
+              f"{statistics.median(n_chosen) if n_chosen else 0:>8.0f}")
+        if steady:
+            out[f"recording_{n_targets}_in_sink_steady_cpu_us_per_meas"] = statistics.median(steady)
         out[f"recording_{n_targets}_cost_wall_us_per_meas"] = statistics.median(wall)
         out[f"recording_{n_targets}_cost_cpu_us_per_meas"] = statistics.median(cpu)
         out[f"recording_{n_targets}_in_sink_cpu_us_per_meas"] = statistics.median(ins)
