@@ -38,7 +38,10 @@ def drain_burst(q: IntakeQueue, wake: threading.Event, limit: int, *, gap_s: flo
         if left <= 0.0:
             break
         wake.clear()
-        if not len(q) and not wake.wait(min(gap_s, left)):
-            break  # nothing for gap_s: the burst is over
+        if not len(q) and not wake.wait(min(gap_s, left)) and not len(q):
+            # nothing for gap_s, and nothing queued by the time this thread runs again (a wait's
+            # timeout is seen only once it holds the GIL again, and a callback holding the GIL
+            # first may have queued the burst's next samples meanwhile): the burst is over
+            break
         batch.extend(q.drain(limit - len(batch)))
     return batch

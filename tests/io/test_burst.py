@@ -100,3 +100,29 @@ def test_the_wait_is_capped_by_the_linger_and_by_the_limit() -> None:
     finally:
         stop.set()
         t.join()
+
+
+def test_samples_queued_as_the_gap_s_wait_times_out_stay_in_the_batch() -> None:
+    """The wait's timeout is seen only once the loop's thread holds the GIL again; a Zenoh
+    callback that held it first may have queued the burst's next samples meanwhile: they are
+    part of the burst, not the start of the next batch."""
+    q = queue()
+
+    class LateWake(threading.Event):
+        """Times out, and the producer queues two samples just as it does."""
+
+        calls = 0
+
+        def wait(self, timeout: float | None = None) -> bool:
+            self.calls += 1
+            if self.calls == 1:
+                time.sleep(timeout or 0.0)
+                for i in (100, 101):
+                    assert q.offer(time.time_ns(), KEY, 8, lambda i=i: i.to_bytes(8, "little")) is None
+                return False
+            return super().wait(timeout)
+
+    wake = LateWake()
+    offer(q, wake, 0)
+    batch = drain_burst(q, wake, 10_000, gap_s=0.01, linger_s=1.0)
+    assert [int.from_bytes(r[2], "little") for r in batch] == [0, 100, 101]
