@@ -17,16 +17,11 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
+from bench.ab_table import print_ab
 from bench.e2e_procs import Publisher
 from bench.service_e2e import latency_run, throughput_run
 
 VARIANTS = {"thread": {}, "loop": {"background": False}}  # [recording] keys over configs/service.toml
-
-
-def _spread(xs: list[float]) -> str:
-    return f"{np.median(xs):.1f} ({min(xs):.1f}-{max(xs):.1f})" if xs else "-"
 
 
 def run(*, pairs: int = 3, duration_s: float = 20.0, quick: bool = False) -> dict[str, Any]:
@@ -57,26 +52,9 @@ def run(*, pairs: int = 3, duration_s: float = 20.0, quick: bool = False) -> dic
                       f"{row['lat10000']['kept_up']}; 1k/s p50 {_ms(row['lat1000']['p50_ms'])} p99 "
                       f"{_ms(row['lat1000']['p99_ms'])} max {_ms(row['lat1000']['max_ms'])}; blast at 1000 targets "
                       f"{(t['rate'] or 0):,.0f}/s", flush=True)
-    print_ab(rows)
+    print_ab(rows, new="thread", old="loop", new_header="thread (shipped)", old_header="loop")
     return {"rows": rows, "loadavg_end": os.getloadavg()}
 
 
 def _ms(x: float | None) -> str:
     return "n/a" if x is None else f"{x:.1f} ms"
-
-
-def print_ab(rows: list[dict[str, Any]]) -> None:
-    figures = [("10k/s p50 ms", "lat10000", "p50_ms"), ("10k/s p99 ms", "lat10000", "p99_ms"),
-               ("10k/s max ms", "lat10000", "max_ms"), ("1k/s p50 ms", "lat1000", "p50_ms"),
-               ("1k/s p99 ms", "lat1000", "p99_ms"), ("1k/s max ms", "lat1000", "max_ms"),
-               ("blast at 1000 targets, k/s", "throughput", "rate")]
-    print("\n| figure | thread (shipped), median (min-max) | loop | thread/loop per pair |\n|---|---|---|---|")
-    for label, run_key, key in figures:
-        by: dict[str, dict[int, float]] = {name: {} for name in VARIANTS}
-        for r in rows:
-            v = r[run_key].get(key)
-            if v is not None:
-                by[r["variant"]][r["pair"]] = v / 1e3 if key == "rate" else v
-        ratios = [by["thread"][k] / by["loop"][k] for k in sorted(by["thread"]) if k in by["loop"] and by["loop"][k]]
-        print(f"| {label} | {_spread(list(by['thread'].values()))} | {_spread(list(by['loop'].values()))} | "
-              + (", ".join(f"{x:.2f}" for x in ratios) or "-") + " |")

@@ -21,18 +21,11 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
+from bench.ab_table import FIGURES, print_ab, value
 from bench.e2e_procs import Publisher
 from bench.service_e2e import latency_run, throughput_run
 
 ROOT = Path(__file__).resolve().parent.parent
-FIGURES = [("10k/s p50 ms", "lat10000", "p50_ms"), ("10k/s p99 ms", "lat10000", "p99_ms"),
-           ("10k/s max ms", "lat10000", "max_ms"), ("1k/s p50 ms", "lat1000", "p50_ms"),
-           ("1k/s p99 ms", "lat1000", "p99_ms"), ("1k/s max ms", "lat1000", "max_ms"),
-           ("blast at 1000 targets, k/s", "throughput", "rate")]
-
-
 @contextmanager
 def worktree(rev: str):
     """A detached worktree of `rev` (its commit id and path), removed afterwards."""
@@ -85,27 +78,10 @@ def run(*, base: str = "HEAD", pairs: int = 4, duration_s: float = 20.0, quick: 
                 rows.append(row)
                 print(f"  pair {k} {name:4s}: " + ", ".join(f"{label} {_value(row, run_key, key)}"
                                                             for label, run_key, key in FIGURES), flush=True)
-    print_ab(rows, base=f"{base} ({commit})")
+    print_ab(rows, new="tree", old="base", new_header="working tree", old_header=f"{base} ({commit})")
     return {"base": base, "commit": commit, "rows": rows, "loadavg_end": os.getloadavg()}
 
 
 def _value(row: dict[str, Any], run_key: str, key: str) -> str:
-    v = row[run_key].get(key)
-    return "n/a" if v is None else f"{v / 1e3:.1f}" if key == "rate" else f"{v:.1f}"
-
-
-def print_ab(rows: list[dict[str, Any]], *, base: str) -> None:
-    print(f"\n| figure | working tree, median (min-max) | {base} | tree/base per pair |\n|---|---|---|---|")
-    for label, run_key, key in FIGURES:
-        by: dict[str, dict[int, float]] = {"tree": {}, "base": {}}
-        for r in rows:
-            v = r[run_key].get(key)
-            if v is not None:
-                by[r["variant"]][r["pair"]] = v / 1e3 if key == "rate" else v
-        ratios = [by["tree"][k] / by["base"][k] for k in sorted(by["tree"]) if k in by["base"] and by["base"][k]]
-        print(f"| {label} | {_spread(list(by['tree'].values()))} | {_spread(list(by['base'].values()))} | "
-              + (", ".join(f"{x:.2f}" for x in ratios) or "-") + " |")
-
-
-def _spread(xs: list[float]) -> str:
-    return f"{np.median(xs):.1f} ({min(xs):.1f}-{max(xs):.1f})" if xs else "-"
+    v = value(row, run_key, key)
+    return "n/a" if v is None else f"{v:.1f}"

@@ -6,8 +6,9 @@ returns the estimates to publish. `ingest(records, more=True)` says more samples
 that share the last one's scan (sensor, t_ns) wait for the next call, so a scan cut by the batch
 limit is run once, whole, instead of run and then run again with its rest (a rescan: at 1000
 targets, 16 % of the service's loop under a blast). Until then they count as not yet received
-(`holding`); what the tracker computes is the same (it does not depend on batching). The live service feeds it batches drained from its intake
-queue; `fusion replay` feeds it the same records read back from a stream file. Admission is
+(`holding`); what the tracker computes is the same (it does not depend on batching). The live
+service feeds it batches drained from its intake queue; `fusion replay` feeds it the same
+records read back from a stream file. Admission is
 decided one sample at a time in arrival order (the arrival time feeds the tracker's clock), so
 a replay reproduces the live run's estimates exactly, however the records are batched.
 

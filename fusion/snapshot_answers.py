@@ -41,7 +41,7 @@ class SnapshotAnswers:
         comprehension over `e.key` (timeit, 667 estimates)."""
         if len(estimates) != len(payloads):
             raise ValueError(f"{len(estimates)} estimates, {len(payloads)} payloads")
-        self._encoded.update(zip(map(id, estimates), zip(estimates, payloads)))
+        self._encoded.update(zip(map(id, estimates), zip(estimates, payloads)))  # noqa: B905 (lengths checked above)
 
     def refresh(self) -> None:
         """Rebuild the payload from the current snapshot (loop thread)."""
