@@ -2,7 +2,8 @@
 number of tracks.
 
 Rerun costs ~0.1-0.5 ms per `send_columns` call here, whatever its size, so rows are buffered and
-written with one call per entity, and the number of entities is bounded: the data of record are
+written with one call per entity (fusion.io.rerun_file writes them), and the number of entities is
+bounded: the data of record are
 three all-track entities (record/*: one row per estimate, association or event), scored every
 `flush_interval_s` (checked on each step; each flush's share of the loop's time stays small) and
 written every `write_interval_s` (the flush interval unless set), once an entity holds
@@ -51,7 +52,6 @@ Timelines: `t` (sensor time: a duration from the stream's start, or a timestamp 
 
 from __future__ import annotations
 
-import json
 import time
 import uuid
 from collections.abc import Callable, Mapping
@@ -61,11 +61,12 @@ from typing import Any
 import numpy as np
 
 from fusion.core.checks import Array
-from fusion.io import blueprint, step_rows, track_rows
-from fusion.io.columns import Column, components, stack, time_column
+from fusion.io import step_rows, track_rows
+from fusion.io.columns import Column, stack
 from fusion.io.derive import world
-from fusion.io.labels import is_epoch, short_id
+from fusion.io.labels import short_id
 from fusion.io.palette import colour
+from fusion.io.rerun_file import RerunFile
 from fusion.io.viewed import FINAL
 from fusion.tracking.results import Estimate, StepResult
 
@@ -115,13 +116,13 @@ class RerunSink:
         meta: Mapping[str, Any] | None = None, counts: Callable[[], Mapping[str, int]] | None = None,
         run_id: str | None = None, pause: Callable[[], None] | None = None,
     ) -> None:
-        import rerun as rr
-
-        self._rr = rr
-        self.path = Path(path)
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        self.rec = rr.RecordingStream(application_id, recording_id=recording_id)
-        self.rec.save(str(self.path))
+        self.run_id = run_id or uuid.uuid4().hex  # a new run unless continuing one (fusion.io.recording)
+        info = {"layout": list(layout), "position_indices": list(position_indices),
+                "velocity_indices": list(velocity_indices), "labels": "fusion.io.labels.short_id", **(meta or {}),
+                "run_id": self.run_id}
+        self.file = RerunFile(Path(path), recording_id=recording_id, application_id=application_id, meta=info)
+        self.path = self.file.path
+        self.rec = self.file.rec
         self.rows = track_rows.Rows(layout, list(position_indices), list(velocity_indices))
         self.ndim = len(position_indices)
         self._cols: dict[str, Column] = {}
@@ -133,7 +134,6 @@ class RerunSink:
         self._truth_rows: list[tuple[int, int, Array, str]] = []
         self._scored: list[Any] = []  # the viewed tracks' rows (fusion.io.view_rows.Stacked) since the last view flush
         self._pending = 0
-        self.rows_written = 0
         self._flush_rows = flush_rows
         self._interval = flush_interval_s
         self._write_interval = flush_interval_s if write_interval_s is None else write_interval_s
@@ -151,17 +151,7 @@ class RerunSink:
         self._counts_written: list[tuple[str, int]] = []  # the counts of the last counts rows
         self._newest_t = 0
         self._horizon_ns: int | None = None  # the newest StepResult.horizon_ns: rows before it are final
-        self._epoch: bool | None = None  # t is an epoch time (decided from the first rows)
-        self._arrival_epoch: bool | None = None
-        self._written: set[str] = set()
-        self._styled: set[str] = set()
-        self._layout_key: tuple = ()
         self._closed = False
-        self.run_id = run_id or uuid.uuid4().hex  # a new run unless continuing one (fusion.io.recording)
-        info = {"layout": list(layout), "position_indices": list(position_indices),
-                "velocity_indices": list(velocity_indices), "labels": "fusion.io.labels.short_id", **(meta or {}),
-                "run_id": self.run_id}
-        self.rec.log("meta", rr.TextDocument(json.dumps(info, sort_keys=True), media_type="text/plain"), static=True)
         # the names of an IMM's modes for their probability series (meta "modes"; else "mode j")
         self.mode_names: tuple[str, ...] = tuple(str(n) for n in (meta or {}).get("modes", ()))
         # each sensor's measured components as (name, unit), to split the gain by unit (meta
@@ -175,18 +165,19 @@ class RerunSink:
         """Carry what spans files over from the sink of the previous file of a rotated set: the
         truth kept for scoring, the viewed tracks, and the kind of the time axes."""
         self.rows.continue_from(previous.rows)
-        self._epoch, self._arrival_epoch = previous._time_kinds()
+        self.file.epoch, self.file.arrival_epoch = previous.file.epoch, previous.file.arrival_epoch
         self._step = previous.steps()
-
-    def _time_kinds(self) -> tuple[bool | None, bool | None]:
-        return self._epoch, self._arrival_epoch
 
     @property
     def epoch_time(self) -> bool | None:
         """Whether the `t` timeline holds epoch timestamps (True) or durations from the stream's
         start (False); None until the first rows are written. Anything else logged on `t`
         (fusion.io.smoothed) must use the same kind: Rerun keeps one type per timeline."""
-        return self._epoch
+        return self.file.epoch
+
+    @property
+    def rows_written(self) -> int:
+        return self.file.rows_written
 
     def steps(self) -> int:
         """Tracker steps logged so far (continued across a rotated set)."""
@@ -367,62 +358,23 @@ class RerunSink:
         self._last_flush = time.monotonic()
 
     def _send(self, cols: dict[str, Column]) -> None:
-        """One send_columns call per entity (in name order), its series style first."""
-        if cols and self._epoch is None:
-            firsts = [c.first_times() for c in cols.values() if len(c)]
-            self._epoch = bool(firsts) and is_epoch(min(f[0] for f in firsts))
-            self._arrival_epoch = bool(firsts) and is_epoch(min(f[1] for f in firsts))
-        rr = self._rr
-        n_written = len(self._written)
-        for entity in sorted(cols):
-            c = cols[entity]
-            if not len(c):
-                continue
-            self._pause()
-            self._style(entity, c)
-            t_ns, step, arrival_ns = c.times()
-            idx = [time_column(rr, "t", t_ns, epoch=bool(self._epoch)),
-                   rr.TimeColumn("step", sequence=step),
-                   time_column(rr, "arrival", arrival_ns, epoch=bool(self._arrival_epoch))]
-            self.rec.send_columns(entity, indexes=idx, columns=components(rr, c), strict=True)
-            self.rows_written += len(c)
-            self._written.add("/" + entity)
-        if len(self._written) != n_written and not self._waiting:  # once the view flush is all out
+        """The entities' rows to the file (fusion.io.rerun_file), the layout again once an entity
+        is written for the first time and the view flush is all out."""
+        if self.file.send(cols, self._pause) and not self._waiting:
             self._send_blueprint()
 
-    def _style(self, entity: str, c: Column) -> None:
-        """Series names and colours, once per entity (static)."""
-        if entity in self._styled or "names" not in c.style:
-            return
-        self._styled.add(entity)
-        rr = self._rr
-        kw = {"names": list(c.style["names"]), "colors": [list(x) for x in c.style["colors"]]}
-        if c.style.get("points"):
-            size = float(c.style.get("marker_size", 1.5))
-            self.rec.log(entity, rr.SeriesPoints(marker_sizes=[size] * len(kw["names"]), **kw), static=True)
-        else:
-            self.rec.log(entity, rr.SeriesLines(widths=list(c.style.get("widths", [2.0] * len(kw["names"]))), **kw),
-                         static=True)
-
     def _send_blueprint(self) -> None:
-        """(Re)send the layout when the viewed tracks or the views holding data changed (a few
-        times per file: the number of viewed tracks and of their views is bounded)."""
-        viewed = self.rows.viewed_labels()
-        key = blueprint.layout_key(viewed=viewed, axes=self.rows.axes, written=self._written)
-        if key == self._layout_key:
-            return
-        self._layout_key = key
+        """The layout of the viewed tracks and of the views holding data (sent when it changed)."""
         centre, extent = self.rows.scene()
-        self.rec.send_blueprint(blueprint.build(ndim=self.ndim, axes=self.rows.axes, viewed=viewed,
-                                                written=self._written, centre=centre, extent_m=extent))
+        self.file.send_layout(ndim=self.ndim, axes=self.rows.axes, viewed=self.rows.viewed_labels(), centre=centre,
+                              extent_m=extent)
 
     def close(self) -> None:
         """Flush everything, mark where viewed tracks end, and finish the file (complete footer)."""
         if self._closed:
             return
         self._flush(views=True, final=True, ends=True)
-        self.rec.flush()
-        self.rec.disconnect()
+        self.file.close()
         self._closed = True
 
     def __enter__(self) -> RerunSink:
