@@ -41,11 +41,12 @@ from fusion.io.burst import drain_burst
 from fusion.io.checkpointer import Checkpointer, counts_since, service_checkpoint_path
 from fusion.io.gain_groups import measured_components
 from fusion.io.intake_queue import IntakeLimits, IntakeQueue
-from fusion.io.recording import RotatingSink, service_recording
+from fusion.io.outputs import Outputs, open_outputs
+from fusion.io.recording import RotatingSink
 from fusion.io.recording_guard import GuardedSink
 from fusion.io.rerun_sink import RerunSink
 from fusion.io.sink_thread import SinkThread
-from fusion.io.stream_rotation import Retention, RotatingStream
+from fusion.io.stream_rotation import RotatingStream
 from fusion.io.zenoh_advanced import RecoveringSubscription
 from fusion.io.zenoh_bus import connection_of, open_with_retry
 from fusion.io.zenoh_publishers import KeyedPublishers
@@ -78,12 +79,9 @@ class Service:
                                      one_file=recording_path is not None)
         self.checkpoints = None if cp is None else Checkpointer(cp, interval_s=config.checkpoint.interval_s)
         self.tracker = Tracker(config.tracker)  # the checkpoint's state, if any, is restored into it by open()
-        self.sink: RotatingSink | RerunSink | None = None
-        self.stream: RotatingStream | None = None
-        self._guard: GuardedSink | None = None
+        self._where = (recording_dir, recording_path, stream_path)  # the files are created by open()
+        self._out = Outputs(None, None, None, None)  # fusion.io.outputs
         self._writer: SinkThread | None = None  # the recording's thread ([recording] background)
-        self._retention: Retention | None = None
-        self._outputs = (recording_dir, recording_path, stream_path)  # files are created by open()
         self.pipeline = Pipeline(
             self.tracker, wire.Codec(self.ns), sink=None,
             max_future_wall_ns=round(config.intake.max_future_wall_s * 1e9),
@@ -146,45 +144,35 @@ class Service:
             self._wake.set()
 
     def _open_outputs(self) -> None:
-        """Create the recording and the stream file (only once the session is open, so that a
-        service that cannot start leaves no files behind)."""
-        recording_dir, recording_path, stream_path = self._outputs
-        rc = self.config.recording
-        rdir = Path(recording_dir) if recording_dir is not None else Path(rc.directory)
-        common: dict[str, Any] = dict(
-            layout=self.tracker.layout, position_indices=self.tracker.position_indices,
-            velocity_indices=self.tracker.velocity_indices,
-            meta={"namespace": self.ns, "sensors": sorted(self.tracker.sensors), "model": self.tracker.model_name,
-                  "modes": mode_names(self.config.tracker),
-                  "measured": measured_components(self.tracker.sensors, self.tracker.layout)},
-        )
-        writer = SinkThread(counts=self._counts_for_recording) if rc.background else None
-        common["counts"] = self._counts_for_recording if writer is None else writer.counts
-        common["pause"] = None if writer is None else writer.pause
-        if recording_path is not None:
-            self.sink = RerunSink(recording_path, recording_id=Path(recording_path).stem,
-                                  flush_interval_s=rc.flush_interval_s, write_interval_s=rc.write_interval_s,
-                                  **common)
-        elif rc.enabled:
-            self.sink = service_recording(rc, rdir, **common)
-        rotating = self.sink if isinstance(self.sink, RotatingSink) else None
-        if stream_path is not None or (self.sink is not None and rc.stream):
-            sp = Path(stream_path) if stream_path is not None else self.sink.path.with_suffix(wire.STREAM_SUFFIX)  # type: ignore[union-attr]
-            follow = None if rotating is None or stream_path is not None else (lambda: rotating.path)
-            self.stream = RotatingStream(sp, namespace=self.ns, rotate_bytes=int(rc.rotate_mb * 1e6), follow=follow)
-        if rotating is not None:
-            self._retention = Retention(rdir, prefix=rc.prefix, keep_files=rc.keep_files,
-                                        keep_bytes=int(rc.keep_mb * 1e6))
-        self._guard = None if self.sink is None else GuardedSink(self.sink)
-        if self._guard is not None and writer is not None:
-            writer.start(self._guard)
-            self._writer = writer
+        """Create the recording and the stream file (fusion.io.outputs; only once the session is
+        open, so that a service that cannot start leaves no files behind)."""
+        recording_dir, recording_path, stream_path = self._where
+        tr = self.tracker
+        self._out = open_outputs(
+            self.config.recording, namespace=self.ns, recording_dir=recording_dir, recording_path=recording_path,
+            stream_path=stream_path, counts=self._counts_for_recording,
+            sink_args={"layout": tr.layout, "position_indices": tr.position_indices,
+                       "velocity_indices": tr.velocity_indices,
+                       "meta": {"namespace": self.ns, "sensors": sorted(tr.sensors), "model": tr.model_name,
+                                "modes": mode_names(self.config.tracker),
+                                "measured": measured_components(tr.sensors, tr.layout)}})
+        self._writer = self._out.writer
         self.pipeline.sink = self._recording
+
+    @property
+    def sink(self) -> RotatingSink | RerunSink | None:
+        """The recording (None when off)."""
+        return self._out.sink
+
+    @property
+    def stream(self) -> RotatingStream | None:
+        """The raw input's stream file (None when off)."""
+        return self._out.stream
 
     @property
     def _recording(self) -> SinkThread | GuardedSink | None:
         """Where the pipeline and the loop send the recording's calls: its thread, or the guard."""
-        return self._writer if self._writer is not None else self._guard
+        return self._out.recording
 
     def _warm_up(self) -> None:
         """Before anything subscribes: the first call of a compiled kernel compiles it (about 20 s
@@ -215,10 +203,7 @@ class Service:
             self._resume()
             self._open_outputs()
         except BaseException:
-            if self._recording is not None:
-                self._recording.close()
-            elif self.sink is not None:
-                self.sink.close()
+            self._out.close()
             self.session.close()
             self.session = None
             raise
@@ -318,8 +303,7 @@ class Service:
                 self.snapshots.answer_waiting()
                 if self._recording is not None:
                     self._recording.maybe_flush()
-                if self._retention is not None:
-                    self._retention.maybe_sweep(self._open_files())
+                self._out.maybe_sweep()
                 if self.checkpoints is not None:
                     self.checkpoints.maybe_write(self.tracker)
                 self._refresh_status()
@@ -356,12 +340,7 @@ class Service:
         if self._track_pubs is not None:
             self._track_pubs.close()
             self._track_pubs = None
-        if self._recording is not None:
-            self._recording.close()
-        if self.stream is not None:
-            self.stream.close()
-        if self._retention is not None:
-            self._retention.sweep(self._open_files())
+        self._out.close()
         self.session.close()
         self.session = None
         log.info("fusion service stopped: %s", self.status_dict()["counts"])
@@ -407,11 +386,11 @@ class Service:
             "tracks": dict(sorted(by_status.items())),
             "latency": self.pipeline.latency.stats(),
             "recording": None if self.sink is None else str(self.sink.path),
-            "recording_bytes": 0 if self.sink is None else self._recording_bytes(),
+            "recording_bytes": self._out.recording_bytes(),
             "queue_depth": len(self._q),
             "gaps": self._gaps(),
             "zenoh": self._link(),
-            "recording_error": self._recording_error(),
+            "recording_error": self._out.error(),
             "recording_queue": 0 if self._writer is None else self._writer.queued_rows,
             "checkpoint": None if self.checkpoints is None else self.checkpoints.status(),
         }
@@ -444,18 +423,6 @@ class Service:
                 row = out.setdefault(sensor, {"missing": 0, "filled": 0, "epochs": 0, "restarts": 0})
                 row["zenoh_missed"] = row.get("zenoh_missed", 0) + n
         return dict(sorted(out.items()))
-
-    def _open_files(self) -> tuple[Path, ...]:
-        return tuple(p.path for p in (self.sink, self.stream) if p is not None)
-
-    def _recording_error(self) -> str | None:
-        errors = [g.error for g in (self._guard, self.stream) if g is not None and g.error]
-        return "; ".join(errors) or None
-
-    def _recording_bytes(self) -> int:
-        if isinstance(self.sink, RotatingSink):
-            return self.sink.size_bytes()
-        return self.sink.path.stat().st_size if self.sink is not None and self.sink.path.exists() else 0
 
     def wait_idle(self, *, quiet_s: float = 0.3, timeout_s: float = 60.0) -> bool:
         """Wait (from another thread) until every sample that arrived is handled (estimates
