@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import faulthandler
 import signal
 import threading
 import time
@@ -17,7 +18,8 @@ SERVE_DESCRIPTION = """\
 Run the fusion service until Ctrl-C (or SIGTERM, or --duration): measurements in over Zenoh
 (fusion/NS/meas/*), track estimates out (fusion/NS/tracks/*), every step recorded to rotating
 Rerun files (.rrd) with the raw input beside them (.fstream, for `fusion replay`). While it runs,
-`fusion status` and `fusion tracks` ask it how it is doing. A scenario file
+`fusion status` and `fusion tracks` ask it how it is doing; `kill -USR1 PID` prints every
+thread's stack to stderr (for a service that seems stuck) and it goes on. A scenario file
 (configs/scenarios/NAME.toml) works as a configuration too: its [service] table is used."""
 
 SERVE_EXAMPLES = """\
@@ -91,6 +93,8 @@ def serve(args: argparse.Namespace) -> int:
     svc = Service(cfg, recording_dir=args.recordings)
     signal.signal(signal.SIGTERM, lambda *_: svc.stop())
     signal.signal(signal.SIGINT, lambda *_: svc.stop())
+    if hasattr(signal, "SIGUSR1"):  # every thread's stack to stderr, even with the loop stuck in C code
+        faulthandler.register(signal.SIGUSR1, all_threads=True, chain=False)
     t0 = time.monotonic()
     svc.open()
     if svc.session is None:  # stopped while connecting

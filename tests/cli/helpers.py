@@ -6,6 +6,7 @@ import fcntl
 import os
 import pty
 import select
+import signal
 import struct
 import subprocess
 import sys
@@ -33,6 +34,22 @@ def run(*argv: str, cwd: Path, timeout: float = 120.0) -> subprocess.CompletedPr
 def start(*argv: str, cwd: Path) -> subprocess.Popen[str]:
     return subprocess.Popen([script(argv[0]), *argv[1:]], cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             stdin=subprocess.DEVNULL, text=True)
+
+
+def stop(proc: subprocess.Popen[str], *, timeout_s: float = 30.0) -> tuple[str, str]:
+    """Ctrl-C (SIGINT), then its (stdout, stderr) once it has exited. One still running after
+    timeout_s is asked for its threads' stacks (SIGUSR1: `fusion serve` prints them to stderr),
+    killed, and fails the test with the end of its stderr: where it was stuck."""
+    proc.send_signal(signal.SIGINT)
+    try:
+        return proc.communicate(timeout=timeout_s)
+    except subprocess.TimeoutExpired:
+        proc.send_signal(signal.SIGUSR1)
+        time.sleep(1.0)
+        proc.kill()
+        _, err = proc.communicate(timeout=10)
+        raise AssertionError(f"{proc.args[0]} did not stop within {timeout_s} s of SIGINT; the end of its "
+                             f"stderr, with its threads' stacks at the timeout:\n{err[-8000:]}") from None
 
 
 def one_error_line(r: subprocess.CompletedProcess[str]) -> str:

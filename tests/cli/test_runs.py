@@ -15,7 +15,7 @@ import pytest
 
 from fusion.cli.runner import Exit
 from fusion.io.zenoh_bus import free_tcp_port
-from tests.cli.helpers import SERVICE_TOML, run, run_on_terminal, start
+from tests.cli.helpers import SERVICE_TOML, run, run_on_terminal, start, stop
 
 
 @pytest.fixture(scope="module")
@@ -139,3 +139,23 @@ def test_serve_status_tracks_publish_record(tmp_path: Path) -> None:
     assert re.search(r"stopped after .*: received \d+ measurements: \d+ applied", out), out
     assert "wrote rec/" in out and ".fstream" in out
     assert "Traceback" not in err
+
+
+def test_serve_prints_every_threads_stack_on_sigusr1_and_goes_on(tmp_path: Path) -> None:
+    """`kill -USR1` on a running service: every thread's stack on stderr (the loop's among them),
+    and the service still serves and stops cleanly."""
+    ep = f"tcp/127.0.0.1:{free_tcp_port()}"
+    svc = start("fusion", "serve", "-c", str(SERVICE_TOML), "-l", ep, "--recordings", "rec", cwd=tmp_path)
+    try:
+        assert svc.stdout.readline().startswith("fusion serving namespace 'demo'")  # type: ignore[union-attr]
+        svc.send_signal(signal.SIGUSR1)
+        time.sleep(0.5)
+        assert svc.poll() is None, "the service stopped on SIGUSR1"
+        st = run("fusion", "status", "-e", ep, "--json", cwd=tmp_path)
+        assert st.returncode == 0 and json.loads(st.stdout)["type"] == "status", st.stderr
+    finally:
+        out, err = stop(svc)
+    assert svc.returncode == 0, err
+    assert "Thread 0x" in err and "most recent call first" in err, err
+    assert re.search(r'File ".*fusion/service\.py", line \d+ in run', err), err
+    assert "stopped after" in out

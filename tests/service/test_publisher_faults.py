@@ -11,7 +11,7 @@ import time
 from pathlib import Path
 
 from fusion import messages as m
-from tests.cli.helpers import SERVICE_TOML, start
+from tests.cli.helpers import SERVICE_TOML, start, stop
 from tests.service.test_crash import Served, _wait
 
 
@@ -56,7 +56,6 @@ def test_a_publisher_in_a_crash_loop_costs_only_its_lost_samples(tmp_path: Path)
         assert st.tracks.get("confirmed", 0) >= 1, st.tracks
         assert sv.proc.poll() is None, "the service died"
     finally:
-        sv.proc.send_signal(signal.SIGINT)
-        sv.proc.wait(timeout=30)
+        stop(sv.proc)
         sv.close()
     assert sv.proc.returncode == 0
