@@ -177,6 +177,7 @@ class RerunSink:
 
     @property
     def rows_written(self) -> int:
+        """Rows written to the file so far (fusion.io.rerun_file)."""
         return self.file.rows_written
 
     def steps(self) -> int:

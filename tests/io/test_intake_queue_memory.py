@@ -26,4 +26,5 @@ def test_counted_bytes_are_the_traced_bytes() -> None:
     finally:
         tracemalloc.stop()
     assert len(q) == len(payloads) >= 2000
-    assert 0.9 <= q.nbytes / traced <= 1.1, f"counted {q.nbytes / len(q):.0f} bytes per sample, traced {traced / len(q):.0f}"
+    assert 0.9 <= q.nbytes / traced <= 1.1, \
+        f"counted {q.nbytes / len(q):.0f} bytes per sample, traced {traced / len(q):.0f}"

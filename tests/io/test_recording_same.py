@@ -1,8 +1,8 @@
 """The recording reads back the same as before the sink's batching was restructured: the same
 entities, the same number of rows in each, the same rows (tests/io/data/recording_reference.json,
-written by `python -m tests.io.recording_digest` with the sink of commit 140dee0, before the batching was merged), for seeded runs
-of three reference scenarios: mix (IMM, radar + camera, clutter, late data: replays and
-retractions), helix3d (3-D: ellipsoids) and cv1d_a (1-D).
+written by `python -m tests.io.recording_digest` with the sink of commit 140dee0, before the
+batching was merged), for seeded runs of three reference scenarios: mix (IMM, radar + camera,
+clutter, late data: replays and retractions), helix3d (3-D: ellipsoids) and cv1d_a (1-D).
 
 One change on purpose: the end marker of a viewed track (world/tracks/<label>/end) was placed
 before the last flush's rows were derived, so it lagged the track's end by up to a flush (and a

@@ -21,9 +21,9 @@ def test_latency_add_many_is_add_of_each(seed: int) -> None:
             one.add(s, x)
         many.add_many(s, xs)
         assert one.stats() == many.stats()
-        for k in one._ring:  # noqa: SLF001 (the rings themselves, value for value)
-            n = min(one._n[k], one.window)  # noqa: SLF001
-            assert one._ring[k][:n].tobytes() == many._ring[k][:n].tobytes()  # noqa: SLF001
+        for k in one._ring:  # the rings themselves, value for value
+            n = min(one._n[k], one.window)
+            assert one._ring[k][:n].tobytes() == many._ring[k][:n].tobytes()
 
 
 @pytest.mark.parametrize("seed", range(4))

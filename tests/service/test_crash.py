@@ -6,6 +6,7 @@ restarted on the same folder resumes it (status: tracks and age) and tracks agai
 
 from __future__ import annotations
 
+import contextlib
 import signal
 import threading
 import time
@@ -74,10 +75,8 @@ class Served:
 
     def publish_in_background(self, samples: list[Sample]) -> None:
         def go() -> None:
-            try:
+            with contextlib.suppress(Exception):
                 publish(self.session, samples, speed=1.0, match_timeout_s=5.0, stop=self.stop_pub)
-            except Exception:
-                pass
 
         self.pub_thread = threading.Thread(target=go, name="crash-publisher")
         self.pub_thread.start()

@@ -14,8 +14,8 @@ from fusion.io import wire
 from fusion.pipeline import Pipeline
 from fusion.tracking.detection import Detection
 from fusion.tracking.tracker import Tracker
-from tests.service.test_service import GOOD_SENSOR, _good_and_bad
 from tests.service.harness import scenario_config
+from tests.service.test_service import GOOD_SENSOR, _good_and_bad
 
 NS = "demo"
 
@@ -64,7 +64,7 @@ def test_measurement_decoder_is_decode_measurement() -> None:
         try:
             one = m.decode_measurement(p)
         except m.MessageError:
-            with pytest.raises(Exception):  # noqa: B017,PT011 (msgspec's own errors)
+            with pytest.raises(Exception):  # noqa: B017 (msgspec's own errors)
                 dec(p)
         else:
             assert dec(p) == one
