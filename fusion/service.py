@@ -234,10 +234,11 @@ class Service:
 
     def _step(self, batch: list[Record], *, more: bool = False) -> None:
         """One batch: to the stream file, through the pipeline (`more`: a backlog follows, so the
-        batch's last scan waits for its rest: fusion.pipeline), out to Zenoh."""
+        batch's last scan waits for its rest: fusion.pipeline), out to Zenoh; then the publication
+        view pruned (Pipeline.prune: freeing what it forgets is no longer paid before publishing)."""
         if self.stream is not None:
             self.stream.write_many(batch)
-        out = self.pipeline.ingest(batch, more=more)
+        out = self.pipeline.ingest(batch, more=more, prune=False)  # pruned once the batch is out (below)
         self._processed += len(batch)
         enc = wire.estimate_encoder(self.tracker.layout, self.tracker.model_name)
         BLOCK = self._zenoh.CongestionControl.BLOCK
@@ -263,6 +264,7 @@ class Service:
                 self.session.put(predicted_key(self.ns), encode_predicted(self.tracker, t_ns),
                                  congestion_control=BLOCK)
                 self.predicted_published += 1
+        self.pipeline.prune()
 
     def _publishers(self) -> KeyedPublishers:
         """The track publishers of the current session (fusion.io.zenoh_publishers)."""
