@@ -81,7 +81,6 @@ class Service:
         self.tracker = Tracker(config.tracker)  # the checkpoint's state, if any, is restored into it by open()
         self._where = (recording_dir, recording_path, stream_path)  # the files are created by open()
         self._out = Outputs(None, None, None, None)  # fusion.io.outputs
-        self._writer: SinkThread | None = None  # the recording's thread ([recording] background)
         self.pipeline = Pipeline(
             self.tracker, wire.Codec(self.ns), sink=None,
             max_future_wall_ns=round(config.intake.max_future_wall_s * 1e9),
@@ -156,7 +155,6 @@ class Service:
                        "meta": {"namespace": self.ns, "sensors": sorted(tr.sensors), "model": tr.model_name,
                                 "modes": mode_names(self.config.tracker),
                                 "measured": measured_components(tr.sensors, tr.layout)}})
-        self._writer = self._out.writer
         self.pipeline.sink = self._recording
 
     @property
@@ -168,6 +166,11 @@ class Service:
     def stream(self) -> RotatingStream | None:
         """The raw input's stream file (None when off)."""
         return self._out.stream
+
+    @property
+    def _writer(self) -> SinkThread | None:
+        """The recording's thread ([recording] background), once started."""
+        return self._out.writer
 
     @property
     def _recording(self) -> SinkThread | GuardedSink | None:

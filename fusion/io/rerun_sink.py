@@ -121,8 +121,6 @@ class RerunSink:
                 "velocity_indices": list(velocity_indices), "labels": "fusion.io.labels.short_id", **(meta or {}),
                 "run_id": self.run_id}
         self.file = RerunFile(Path(path), recording_id=recording_id, application_id=application_id, meta=info)
-        self.path = self.file.path
-        self.rec = self.file.rec
         self.rows = track_rows.Rows(layout, list(position_indices), list(velocity_indices))
         self.ndim = len(position_indices)
         self._cols: dict[str, Column] = {}
@@ -167,6 +165,16 @@ class RerunSink:
         self.rows.continue_from(previous.rows)
         self.file.epoch, self.file.arrival_epoch = previous.file.epoch, previous.file.arrival_epoch
         self._step = previous.steps()
+
+    @property
+    def path(self) -> Path:
+        """The .rrd file written."""
+        return self.file.path
+
+    @property
+    def rec(self) -> Any:
+        """The file's Rerun stream (for what is logged beside the sink's rows: fusion.io.smoothed)."""
+        return self.file.rec
 
     @property
     def epoch_time(self) -> bool | None:

@@ -160,7 +160,7 @@ class Rows:
                           err[sel], matched[sel], nees[sel], TX_full(TX, m_idx, X.shape)[sel], W[sel], conf=conf[sel],
                           n_pos=len(self.pi))
 
-    def views(self, batches: list[Stacked], sink: Any, *, pause: Callable[[], None] | None = None) -> None:
+    def views(self, batches: list[Stacked], sink: Any, *, pause: Callable[[], None]) -> None:
         """The viewed tracks' time series and cursor marks, from their rows of the record flushes
         since the last view flush (in their order), and from the rows held for them while they
         were candidates; the rows of the candidates still undecided are held for the next.
@@ -172,8 +172,7 @@ class Rows:
         c = parts[0] if len(parts) == 1 else Stacked.concat(parts)
         present = set(c.ids.tolist())
         for tid in [tid for tid in self.viewed if tid in present]:  # in their order
-            if pause is not None:
-                pause()
+            pause()
             self._track(sink, tid, np.flatnonzero(c.ids == tid), c)
         undecided = self.choice.candidates()
         if undecided:
