@@ -8,9 +8,10 @@ fusion runs through its public API, inputs validated unless check=False: "fusion
 EKF" time KalmanFilter / ExtendedKalmanFilter .predict then .update (two calls, as the tracker's
 per-pair path and a single-track user do); "step()" rows time the fused .step(state, t_ns, z,
 model) (one call, the same Update bit for bit). The floor rows are the compiled calls without
-the methods around them: "kernels alone" the two of the two-call path, "step kernel alone" the
-one of step() (fusion.core.compiled_packed.step_packed on the filter's plan for the model,
-fusion.core.step_plan), on fresh result arrays.
+the methods around them: "kernels alone" the two of the two-call path on fresh result arrays,
+"step call alone" the one of step() (fusion.core.packed_step.step, the C extension where it was
+built, on the filter's plan for the model, fusion.core.step_plan), and "step numba kernel alone"
+the same call through numba's twin (what step() runs on an install without a C compiler).
 
 Timing: CPU time of this process (time.process_time), so that the time spent waiting for a core
 of the shared machine is not counted; the implementations are interleaved (each repeat times
@@ -31,8 +32,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from fusion.core import compiled_step
-from fusion.core.compiled_packed import step_packed
+from fusion.core import compiled_step, packed_step
 from fusion.core.kalman import ExtendedKalmanFilter, KalmanFilter, predict_arrays, update_arrays
 from fusion.core.measurement import CartesianPosition, Radar2D, wrap_angle
 from fusion.core.motion import ConstantVelocity
@@ -43,7 +43,8 @@ from fusion.scenarios import reference
 DT = 0.1
 DT_NS = 100_000_000
 FLOOR = "kernels alone (floor)"
-STEP_FLOOR = "step kernel alone (floor)"
+STEP_FLOOR = "step call alone (floor)"
+STEP_NUMBA = "step numba kernel alone"
 
 
 def floor_setup(cv: ConstantVelocity, meas: CartesianPosition | Radar2D, Z: np.ndarray, x0: np.ndarray,
@@ -68,17 +69,17 @@ def floor_setup(cv: ConstantVelocity, meas: CartesianPosition | Radar2D, Z: np.n
 
 
 def step_floor_setup(cv: ConstantVelocity, meas: CartesianPosition | Radar2D, Z: np.ndarray, x0: np.ndarray,
-                     P0: np.ndarray) -> tuple[Callable[[int], None], Callable[[], np.ndarray]]:
-    """The one compiled call of the public step() (a validating filter's plan for meas at dt),
-    on fresh arrays, without the method around it."""
+                     P0: np.ndarray, call: Callable = packed_step.step) -> tuple[Callable[[int], None],
+                                                                           Callable[[], np.ndarray]]:
+    """The one call of the public step() (fusion.core.packed_step.step: C where it was built) on a
+    validating filter's plan for meas at dt, without the method around it; with
+    call=packed_step.step_numba, numba's kernel with its results allocated around it."""
     packed = blob(make_plan(TransitionCache(cv), meas, check=True), DT_NS)
-    n, m = x0.shape[0], meas.ndim_meas
     st = {"x": x0.copy(), "P": P0.copy()}
 
     def step(k: int) -> None:
-        xn, Pn, y, S = np.empty(n), np.empty((n, n)), np.empty(m), np.empty((m, m))
-        step_packed(st["x"], st["P"], Z[k % len(Z)], packed, xn, Pn, y, S)
-        st["x"], st["P"] = xn, Pn
+        out = call(st["x"], st["P"], Z[k % len(Z)], packed, k)
+        st["x"], st["P"] = out.state.x, out.state.P
 
     return step, lambda: st["x"]
 
@@ -151,6 +152,7 @@ def kf_setups(n: int, seed: int = 0) -> dict[str, tuple[Callable[[int], None], C
     setups["textbook numpy"] = (np_step, lambda: st["x"])
     setups[FLOOR] = floor_setup(cv, meas, Z, x0, P0)
     setups[STEP_FLOOR] = step_floor_setup(cv, meas, Z, x0, P0)
+    setups[STEP_NUMBA] = step_floor_setup(cv, meas, Z, x0, P0, packed_step.step_numba)
     return setups
 
 
@@ -221,6 +223,7 @@ def ekf_setups(n: int) -> dict[str, tuple[Callable[[int], None], Callable[[], np
     setups["textbook numpy"] = (np_step, lambda: st["x"])
     setups[FLOOR] = floor_setup(cv, meas, Z, x0, P0)
     setups[STEP_FLOOR] = step_floor_setup(cv, meas, Z, x0, P0)
+    setups[STEP_NUMBA] = step_floor_setup(cv, meas, Z, x0, P0, packed_step.step_numba)
     return setups
 
 
@@ -294,7 +297,10 @@ GOAL = 10.0  # issue 11 goal 4: the validated single-track step at least 10x fil
 
 def run(*, quick: bool = False, with_batch: bool = True) -> dict[str, object]:
     n, repeats = (2000, 3) if quick else (10_000, 15)
+    print("step() runs " + ("the C extension fusion.core._packed_step" if packed_step.COMPILED else
+                            "numba's twin: this install has no C extension (built without a C compiler?)"))
     out: dict[str, object] = {
+        "step_compiled_c": packed_step.COMPILED,
         "kf": table("KF predict+update, 4-state CV, 2-D position", kf_setups, n=n, repeats=repeats),
         "ekf": table("EKF predict+update, radar2d (range, bearing)", ekf_setups, n=n, repeats=repeats),
     }

@@ -18,9 +18,10 @@ given R (fusion.core.compiled_step). What that call refuses goes the numpy way (
 residual, fusion.core.checks), which raises the typed error, so errors and messages are those of
 the numpy path; results agree with it to rounding (tests/core/test_step_kernels.py).
 `step(state, t_ns, z, model)` is predict then update in one compiled call: with the model's R,
-fusion.core.compiled_packed.step_packed on the plan the filter keeps for that model
-(fusion.core.step_plan: F, Q, the model's parameters and R packed once per time step, so the
-call takes 8 arrays), with a given R fusion.core.compiled_step.step_model. Either gives the same
+fusion.core.packed_step.step on the plan the filter keeps for that model (fusion.core.step_plan:
+F, Q, the model's parameters and R packed once per time step; the call is C where it was built,
+numba's fusion.core.compiled_packed.step_packed otherwise, and returns the Update), with a given
+R fusion.core.compiled_step.step_model. Either gives the same
 Update bit for bit as predict then update and the same errors (tests/core/test_filter_step.py,
 tests/core/test_packed_step.py). The compiled calls keep their intermediates in scratch the
 filter owns (no allocation in the kernels); every array returned is fresh (its own memory,
@@ -36,11 +37,13 @@ from numpy.typing import ArrayLike
 from fusion.core import compiled as _compiled
 from fusion.core import compiled_step as _step
 from fusion.core.checks import Array, as_covariance, as_vector
-from fusion.core.compiled_packed import step_packed as _step_packed
 from fusion.core.gaussian import GaussianState, Update
 from fusion.core.kalman_reference import LOG_2PI, predict_arrays, update_arrays, update_single
 from fusion.core.measurement import MeasurementModel
 from fusion.core.motion import LinearMotionModel, MotionModel
+from fusion.core.packed_step import NOT_TAKEN as _NOT_TAKEN
+from fusion.core.packed_step import step as _packed_step
+from fusion.core.packed_step import step_numba as _packed_step_numba
 from fusion.core.step_plan import StepPlan
 from fusion.core.step_plan import blob as _blob
 from fusion.core.step_plan import make_plan as _make_plan
@@ -160,27 +163,31 @@ class ExtendedKalmanFilter(FilterBase):
         A linear motion model and a model with a compiled twin (linear for the KF), z a float64
         vector, no u: one compiled call. With the model's R, the call of the model's StepPlan
         (fusion.core.step_plan: F, Q, the model and R packed once per time step,
-        fusion.core.compiled_packed); with a given R (a float64 matrix), step_model
+        fusion.core.packed_step); with a given R (a float64 matrix), step_model
         (fusion.core.compiled_step), which checks it. Anything else, or anything the call
         refuses, is the two calls.
         """
         try:
-            blobs, R0, n, shape_P, m, shape_S, _, _, _ = self._plans[model]
+            plan = self._plans[model]
         except (KeyError, TypeError):  # no plan yet, or a model that cannot be a key
             return self._step_unplanned(state, t_ns, z, model, R, u)
-        if R is None and u is None and R0 is model.R and type(z) is _ndarray and z.dtype is _F64 and z.ndim == 1:
+        if R is None and u is None and plan[1] is model.R:
             t = int(t_ns)
             d = t - int(state.t_ns)
-            try:
-                packed = blobs[d]
-            except KeyError:
-                packed = _blob(self._plans[model], d) if d >= 0 else None
+            packed = plan[0].get(d)
+            if packed is None and d >= 0:
+                packed = _blob(plan, d)
             if packed is not None:
-                xn, Pn, y, S = _empty(n), _empty(shape_P), _empty(m), _empty(shape_S)
-                status, nis, ll = _step_packed(state.x, state.P, z, packed, xn, Pn, y, S)
-                if status == 0:
-                    return _new(Update, (_new(GaussianState, (xn, Pn, t)), y, S, nis, ll))
-                return self.update(self.predict(state, t_ns), z, model)
+                x, P = state.x, state.P
+                out = _packed_step(x, P, z, packed, t)
+                if out.__class__ is Update:
+                    return out
+                if out == _NOT_TAKEN:
+                    out = _packed_step_numba(x, P, z, packed, t)
+                    if out.__class__ is Update:
+                        return out
+                if out != _NOT_TAKEN:
+                    return self.update(self.predict(state, t_ns), z, model)
         return self._step_unplanned(state, t_ns, z, model, R, u)
 
     def _fuses(self, model: MeasurementModel) -> bool:
