@@ -8,10 +8,11 @@ fusion runs through its public API, inputs validated unless check=False: "fusion
 EKF" time KalmanFilter / ExtendedKalmanFilter .predict then .update (two calls, as the tracker's
 per-pair path and a single-track user do); "step()" rows time the fused .step(state, t_ns, z,
 model) (one call, the same Update bit for bit). The floor rows are the compiled calls without
-the methods around them: "kernels alone" the two of the two-call path on fresh result arrays,
-"step call alone" the one of step() (fusion.core.packed_step.step, the C extension where it was
-built, on the filter's plan for the model, fusion.core.step_plan), and "step numba kernel alone"
-the same call through numba's twin (what step() runs on an install without a C compiler).
+the methods around them: "two calls alone" the two of the two-call path
+(fusion.core.single.predict and update, the C extension where it was built), "step call alone"
+the one of step() (fusion.core.single.step on the filter's plan for the model,
+fusion.core.step_plan); the "numba" rows the same calls through their numba twins (what an
+install without a C compiler runs).
 
 Timing: CPU time of this process (time.process_time), so that the time spent waiting for a core
 of the shared machine is not counted; the implementations are interleaved (each repeat times
@@ -32,7 +33,8 @@ from collections.abc import Callable
 
 import numpy as np
 
-from fusion.core import compiled_step, packed_step
+from fusion.core import single
+from fusion.core.compiled_step import CHECK_Z
 from fusion.core.kalman import ExtendedKalmanFilter, KalmanFilter, predict_arrays, update_arrays
 from fusion.core.measurement import CartesianPosition, Radar2D, wrap_angle
 from fusion.core.motion import ConstantVelocity
@@ -42,38 +44,37 @@ from fusion.scenarios import reference
 
 DT = 0.1
 DT_NS = 100_000_000
-FLOOR = "kernels alone (floor)"
+FLOOR = "two calls alone (floor)"
+NUMBA = "two numba kernels alone"
 STEP_FLOOR = "step call alone (floor)"
 STEP_NUMBA = "step numba kernel alone"
 
 
 def floor_setup(cv: ConstantVelocity, meas: CartesianPosition | Radar2D, Z: np.ndarray, x0: np.ndarray,
-                P0: np.ndarray) -> tuple[Callable[[int], None], Callable[[], np.ndarray]]:
-    """The two compiled calls the public step makes (fusion.core.compiled_step), on fresh arrays,
-    with z checked as the validated filter does, but without the methods, dt from integer times,
-    the result objects or the fallbacks: what the step costs below the API."""
+                P0: np.ndarray, *, numba: bool = False) -> tuple[Callable[[int], None], Callable[[], np.ndarray]]:
+    """The two calls the public predict and update make (fusion.core.single.predict and update:
+    the C extension where it was built; with numba=True their numba twins, what an install
+    without a C compiler runs), with z checked as the validated filter does, but without the
+    methods, dt from integer times or the fallbacks: what the two calls cost below the API."""
     FQ = TransitionCache(cv)[DT]
-    n, m = x0.shape[0], meas.ndim_meas
+    predict, update = (single.predict_numba, single.update_numba) if numba else (single.predict, single.update)
     st = {"x": x0.copy(), "P": P0.copy()}
-    ws = np.empty(compiled_step.work_size(n, m))
+    code = meas.kernel_kind << 2 | CHECK_Z
 
     def step(k: int) -> None:
-        x, P = np.empty(n), np.empty((n, n))
-        compiled_step.predict_fq(st["x"], st["P"], FQ, x, P, ws)
-        xn, Pn, y, S = np.empty(n), np.empty((n, n)), np.empty(m), np.empty((m, m))
-        compiled_step.update_model(meas.kernel_kind << 2 | compiled_step.CHECK_Z, x, P, Z[k % len(Z)],
-                                   meas.kernel_spec, meas.R, xn, Pn, y, S, ws)
-        st["x"], st["P"] = xn, Pn
+        p = predict(st["x"], st["P"], FQ, k, True)
+        out = update(code, p.x, p.P, Z[k % len(Z)], meas.kernel_spec, meas.R, k)
+        st["x"], st["P"] = out.state.x, out.state.P
 
     return step, lambda: st["x"]
 
 
 def step_floor_setup(cv: ConstantVelocity, meas: CartesianPosition | Radar2D, Z: np.ndarray, x0: np.ndarray,
-                     P0: np.ndarray, call: Callable = packed_step.step) -> tuple[Callable[[int], None],
+                     P0: np.ndarray, call: Callable = single.step) -> tuple[Callable[[int], None],
                                                                            Callable[[], np.ndarray]]:
-    """The one call of the public step() (fusion.core.packed_step.step: C where it was built) on a
+    """The one call of the public step() (fusion.core.single.step: C where it was built) on a
     validating filter's plan for meas at dt, without the method around it; with
-    call=packed_step.step_numba, numba's kernel with its results allocated around it."""
+    call=single.step_numba, numba's kernel with its results allocated around it."""
     packed = blob(make_plan(TransitionCache(cv), meas, check=True), DT_NS)
     st = {"x": x0.copy(), "P": P0.copy()}
 
@@ -151,8 +152,9 @@ def kf_setups(n: int, seed: int = 0) -> dict[str, tuple[Callable[[int], None], C
 
     setups["textbook numpy"] = (np_step, lambda: st["x"])
     setups[FLOOR] = floor_setup(cv, meas, Z, x0, P0)
+    setups[NUMBA] = floor_setup(cv, meas, Z, x0, P0, numba=True)
     setups[STEP_FLOOR] = step_floor_setup(cv, meas, Z, x0, P0)
-    setups[STEP_NUMBA] = step_floor_setup(cv, meas, Z, x0, P0, packed_step.step_numba)
+    setups[STEP_NUMBA] = step_floor_setup(cv, meas, Z, x0, P0, single.step_numba)
     return setups
 
 
@@ -222,8 +224,9 @@ def ekf_setups(n: int) -> dict[str, tuple[Callable[[int], None], Callable[[], np
 
     setups["textbook numpy"] = (np_step, lambda: st["x"])
     setups[FLOOR] = floor_setup(cv, meas, Z, x0, P0)
+    setups[NUMBA] = floor_setup(cv, meas, Z, x0, P0, numba=True)
     setups[STEP_FLOOR] = step_floor_setup(cv, meas, Z, x0, P0)
-    setups[STEP_NUMBA] = step_floor_setup(cv, meas, Z, x0, P0, packed_step.step_numba)
+    setups[STEP_NUMBA] = step_floor_setup(cv, meas, Z, x0, P0, single.step_numba)
     return setups
 
 
@@ -297,10 +300,10 @@ GOAL = 10.0  # issue 11 goal 4: the validated single-track step at least 10x fil
 
 def run(*, quick: bool = False, with_batch: bool = True) -> dict[str, object]:
     n, repeats = (2000, 3) if quick else (10_000, 15)
-    print("step() runs " + ("the C extension fusion.core._packed_step" if packed_step.COMPILED else
-                            "numba's twin: this install has no C extension (built without a C compiler?)"))
+    print("predict, update and step() run " + ("the C extension fusion.core._single" if single.COMPILED else
+          "numba's twins: this install has no C extension (built without a C compiler?)"))
     out: dict[str, object] = {
-        "step_compiled_c": packed_step.COMPILED,
+        "step_compiled_c": single.COMPILED,
         "kf": table("KF predict+update, 4-state CV, 2-D position", kf_setups, n=n, repeats=repeats),
         "ekf": table("EKF predict+update, radar2d (range, bearing)", ekf_setups, n=n, repeats=repeats),
     }

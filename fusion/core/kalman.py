@@ -41,9 +41,13 @@ from fusion.core.gaussian import GaussianState, Update
 from fusion.core.kalman_reference import LOG_2PI, predict_arrays, update_arrays, update_single
 from fusion.core.measurement import MeasurementModel
 from fusion.core.motion import LinearMotionModel, MotionModel
-from fusion.core.packed_step import NOT_TAKEN as _NOT_TAKEN
-from fusion.core.packed_step import step as _packed_step
-from fusion.core.packed_step import step_numba as _packed_step_numba
+from fusion.core.single import NOT_TAKEN as _NOT_TAKEN
+from fusion.core.single import predict as _predict
+from fusion.core.single import predict_numba as _predict_numba
+from fusion.core.single import step as _packed_step
+from fusion.core.single import step_numba as _packed_step_numba
+from fusion.core.single import update as _update
+from fusion.core.single import update_numba as _update_numba
 from fusion.core.step_plan import StepPlan
 from fusion.core.step_plan import blob as _blob
 from fusion.core.step_plan import make_plan as _make_plan
@@ -57,8 +61,8 @@ __all__ = ["LOG_2PI", "ExtendedKalmanFilter", "FilterBase", "KalmanFilter", "pre
 _F64 = np.dtype(np.float64)
 _empty = np.empty
 _ndarray = np.ndarray
-_predict_fq, _update_model, _step_model = _step.predict_fq, _step.update_model, _step.step_model
-_NONFINITE, _CHECK_Z, _CHECK_R = _step.NONFINITE, _step.CHECK_Z, _step.CHECK_R
+_step_model = _step.step_model
+_CHECK_Z, _CHECK_R = _step.CHECK_Z, _step.CHECK_R
 _new = tuple.__new__  # GaussianState and Update are named tuples: built without their __new__
 
 
@@ -117,9 +121,12 @@ class ExtendedKalmanFilter(FilterBase):
     Fast paths (same results to rounding, same errors): a linear motion model predicts with
     F(dt) and Q(dt) cached per dt (fusion.core.transitions) in one compiled call; a model with
     a compiled twin (MeasurementModel.kernel_kind) updates in one compiled call that checks z
-    and a given R itself (fusion.core.compiled_step). Anything that call refuses, and every
-    other model, takes the numpy path below it, which raises the typed error.
+    and a given R itself (fusion.core.compiled_step; both calls through fusion.core.single, C
+    where it was built). Anything that call refuses, and every other model, takes the numpy
+    path below it, which raises the typed error.
     """
+
+    _linear_only = False  # (KalmanFilter: update refuses a nonlinear measurement model)
 
     def __init__(self, motion: MotionModel, *, check: bool = True) -> None:
         super().__init__(motion, check=check)
@@ -141,18 +148,26 @@ class ExtendedKalmanFilter(FilterBase):
     def check(self, on: bool) -> None:
         self._check = on
         self._plans = {}
+        # the flags of update's compiled call with the model's R, and with a given one
+        self._flags_model_R = _CHECK_Z if on else 0
+        self._flags_given_R = _CHECK_Z | _CHECK_R if on else 0
 
     def predict(self, state: GaussianState, t_ns: int, *, u: ArrayLike | None = None) -> GaussianState:
         """Predict to t_ns (>= state.t_ns); u is the control input if the model takes one."""
+        cache = self._transitions
+        if cache is not None and u is None:
+            d = t_ns - state.t_ns
+            if d.__class__ is int and d >= 0:  # int times, forward: the one call (C where built)
+                out = _predict(state.x, state.P, cache[d / NS_PER_S], t_ns, self._check)
+                if out.__class__ is GaussianState:
+                    return out
         t = int(t_ns)
         d = t - int(state.t_ns)
         dt = d / NS_PER_S if d >= 0 else dt_seconds(state.t_ns, t)  # (which raises TimeError)
-        cache = self._transitions
-        if cache is not None and u is None:
-            x, P = _empty(self._n), _empty(self._nn)
-            status = _predict_fq(state.x, state.P, cache[dt], x, P, self._ws)
-            if status == 0 or (status == _NONFINITE and not self.check):
-                return _new(GaussianState, (x, P, t))
+        if cache is not None and u is None:  # what the call did not take, through numba's twin
+            out = _predict_numba(state.x, state.P, cache[dt], t, self._check)
+            if out.__class__ is GaussianState:
+                return out
         return self._predict_numpy(state, t, dt, u)
 
     def step(self, state: GaussianState, t_ns: int, z: ArrayLike, model: MeasurementModel, *,
@@ -240,19 +255,26 @@ class ExtendedKalmanFilter(FilterBase):
         self, state: GaussianState, z: ArrayLike, model: MeasurementModel, *, R: ArrayLike | None = None
     ) -> Update:
         """Fold z (taken at state.t_ns) in; R defaults to the model's."""
+        if self._linear_only and not model.is_linear:
+            raise ConfigError(
+                f"KalmanFilter needs a linear measurement model, got {type(model).__name__}; "
+                "use ExtendedKalmanFilter or UnscentedKalmanFilter"
+            )
         kind = model.kernel_kind
-        if kind and type(z) is _ndarray and z.dtype is _F64 and z.ndim == 1 and (
-                R is None or (type(R) is _ndarray and R.dtype is _F64 and R.ndim == 2)):
-            x = state.x
-            n, m = x.shape[0], model.ndim_meas
-            xn, Pn, y, S = _empty(n), _empty((n, n)), _empty(m), _empty((m, m))
+        if kind:
             if R is None:
-                Ru, code = model.R, (kind << 2 | _CHECK_Z if self.check else kind << 2)
+                Ru = model.R
+                code = kind << 2 | self._flags_model_R
             else:
-                Ru, code = R, (kind << 2 | _CHECK_Z | _CHECK_R if self.check else kind << 2)
-            status, nis, ll = _update_model(code, x, state.P, z, model.kernel_spec, Ru, xn, Pn, y, S, self._ws)
-            if status == 0:
-                return _new(Update, (_new(GaussianState, (xn, Pn, state.t_ns)), y, S, nis, ll))
+                Ru = R
+                code = kind << 2 | self._flags_given_R
+            out = _update(code, state.x, state.P, z, model.kernel_spec, Ru, state.t_ns)
+            if out.__class__ is Update:
+                return out
+            if out == _NOT_TAKEN:
+                out = _update_numba(code, state.x, state.P, z, model.kernel_spec, Ru, state.t_ns)
+                if out.__class__ is Update:
+                    return out
         return self._update_numpy(state, z, model, R)
 
     def _update_numpy(self, state: GaussianState, z: ArrayLike, model: MeasurementModel,
@@ -272,15 +294,7 @@ class KalmanFilter(ExtendedKalmanFilter):
             raise ConfigError(f"KalmanFilter needs a linear motion model, got {type(motion).__name__}")
         super().__init__(motion, check=check)
 
-    def update(
-        self, state: GaussianState, z: ArrayLike, model: MeasurementModel, *, R: ArrayLike | None = None
-    ) -> Update:
-        if not model.is_linear:
-            raise ConfigError(
-                f"KalmanFilter needs a linear measurement model, got {type(model).__name__}; "
-                "use ExtendedKalmanFilter or UnscentedKalmanFilter"
-            )
-        return ExtendedKalmanFilter.update(self, state, z, model, R=R)
+    _linear_only = True  # update refuses a nonlinear measurement model
 
     def _fuses(self, model: MeasurementModel) -> bool:
         return model.is_linear and ExtendedKalmanFilter._fuses(self, model)
