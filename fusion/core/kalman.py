@@ -14,18 +14,19 @@ fusion.core.compiled, which evaluate the Joseph form expanded, P - K H P - (K H 
 stack (fusion.core.compiled_stack). A linear motion model predicts in one compiled call with
 F(dt), Q(dt) cached per dt (fusion.core.transitions); CartesianPosition and Radar2D update in
 one compiled call that also evaluates h, H, the wrapped residual and the checks of z and of a
-given R (fusion.core.compiled_step). What that call refuses goes the numpy way (h, jacobian,
-residual, fusion.core.checks), which raises the typed error, so errors and messages are those of
-the numpy path; results agree with it to rounding (tests/core/test_step_kernels.py).
+given R (fusion.core.compiled_step). Both calls go through fusion.core.single: C where the
+extension was built (the same bits as the numba kernels, without their per-argument dispatch),
+numba's twins otherwise. What a call refuses goes the numpy way (h, jacobian, residual,
+fusion.core.checks), which raises the typed error, so errors and messages are those of the numpy
+path; results agree with it to rounding (tests/core/test_step_kernels.py).
 `step(state, t_ns, z, model)` is predict then update in one compiled call: with the model's R,
-fusion.core.packed_step.step on the plan the filter keeps for that model (fusion.core.step_plan:
-F, Q, the model's parameters and R packed once per time step; the call is C where it was built,
-numba's fusion.core.compiled_packed.step_packed otherwise, and returns the Update), with a given
-R fusion.core.compiled_step.step_model. Either gives the same
-Update bit for bit as predict then update and the same errors (tests/core/test_filter_step.py,
-tests/core/test_packed_step.py). The compiled calls keep their intermediates in scratch the
-filter owns (no allocation in the kernels); every array returned is fresh (its own memory,
-shared with no input, no other result and nothing the filter keeps).
+fusion.core.single.step on the plan the filter keeps for that model (fusion.core.step_plan: F,
+Q, the model's parameters and R packed once per time step; numba's twin is
+fusion.core.compiled_packed.step_packed), with a given R fusion.core.compiled_step.step_model.
+Either gives the same Update bit for bit as predict then update and the same errors
+(tests/core/test_filter_step.py, tests/core/test_packed_step.py). The compiled calls keep their
+intermediates in scratch (no allocation in the kernels); every array returned is fresh (its own
+memory, shared with no input, no other result and nothing the filter keeps).
 The plain numpy reference of the equations (predict_arrays, update_arrays) and the checked
 compiled update of one state (update_single) are in fusion.core.kalman_reference, re-exported.
 """
@@ -44,8 +45,8 @@ from fusion.core.motion import LinearMotionModel, MotionModel
 from fusion.core.single import NOT_TAKEN as _NOT_TAKEN
 from fusion.core.single import predict as _predict
 from fusion.core.single import predict_numba as _predict_numba
-from fusion.core.single import step as _packed_step
-from fusion.core.single import step_numba as _packed_step_numba
+from fusion.core.single import step as _step_call
+from fusion.core.single import step_numba as _step_numba
 from fusion.core.single import update as _update
 from fusion.core.single import update_numba as _update_numba
 from fusion.core.step_plan import StepPlan
@@ -178,7 +179,7 @@ class ExtendedKalmanFilter(FilterBase):
         A linear motion model and a model with a compiled twin (linear for the KF), z a float64
         vector, no u: one compiled call. With the model's R, the call of the model's StepPlan
         (fusion.core.step_plan: F, Q, the model and R packed once per time step,
-        fusion.core.packed_step); with a given R (a float64 matrix), step_model
+        fusion.core.single); with a given R (a float64 matrix), step_model
         (fusion.core.compiled_step), which checks it. Anything else, or anything the call
         refuses, is the two calls.
         """
@@ -194,11 +195,11 @@ class ExtendedKalmanFilter(FilterBase):
                 packed = _blob(plan, d)
             if packed is not None:
                 x, P = state.x, state.P
-                out = _packed_step(x, P, z, packed, t)
+                out = _step_call(x, P, z, packed, t)
                 if out.__class__ is Update:
                     return out
                 if out == _NOT_TAKEN:
-                    out = _packed_step_numba(x, P, z, packed, t)
+                    out = _step_numba(x, P, z, packed, t)
                     if out.__class__ is Update:
                         return out
                 if out != _NOT_TAKEN:
