@@ -113,7 +113,7 @@ def _child(tree: str, targets: int, seconds: float, reps: int) -> dict[str, floa
         svc = Service(cfg)
         svc.session = _Session()
         it = iter(outs)
-        svc.pipeline.ingest = lambda batch: next(it)  # type: ignore[method-assign]
+        svc.pipeline.ingest = lambda batch, **_: next(it)  # type: ignore[method-assign]  # (more=, prune=)
         return svc
 
     timed("publish", lambda svc: [svc._step(b) for b in batches], service)
