@@ -16,7 +16,10 @@
  * numba kernel, which reads any layout, or its general path.
  *
  * bind(GaussianState, Update) must be called once first (fusion.core.single does). Holds the GIL
- * throughout and calls nothing that could release it, so the scratch below is never shared.
+ * throughout, and while the scratch below holds intermediates it calls nothing that could run
+ * Python code (numpy's array allocation is not garbage-collected; the named tuples, whose
+ * allocation may start a collection and so finalizers, are built after the arithmetic is done),
+ * so the scratch is never used by two calls at once.
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
