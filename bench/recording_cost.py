@@ -16,7 +16,8 @@ Reported, per measurement: the cost = (with - without) / measurements, in wall t
 machine's load makes it noisy) and in CPU time of the whole process (time.process_time: every
 thread, Rerun's encoding and writing threads too, which share the 2 cores; other processes do not
 count); and the CPU time inside the sink's calls (log_truth, log_step, maybe_flush; thread
-time). Measured: the scans after the first WARM_S wall seconds of the recording-on run (the same scans
+time, less what the timer itself adds to each call: timer_overhead_s, measured in the run and
+printed). Measured: the scans after the first WARM_S wall seconds of the recording-on run (the same scans
 in the run without) up to the end, the final flush and close included (every row recorded is
 paid for; about MEASURED_S seconds: more than one view flush). A file's start (the sink's CPU
 time in its first WARM_S seconds) and its final flush and close (within the measured figure)
@@ -78,7 +79,11 @@ def batches(n_targets: int, seconds: float, *, ns: str, seed: int = 1) -> list[l
 
 class _Timed:
     """The pipeline's sink, timing the calls it passes on (CPU time of the calling thread: the
-    machine's other load does not count)."""
+    machine's other load does not count), net of `overhead_s` per call: what a timed call with
+    nothing inside adds (timer_overhead_s), which the service, calling its sink untimed, does
+    not pay."""
+
+    overhead_s = 0.0
 
     def __init__(self, sink: Any) -> None:
         self.sink = sink
@@ -87,27 +92,45 @@ class _Timed:
     def log_step(self, result: Any, *, arrival_ns: int | None = None) -> None:
         a = time.thread_time()
         self.sink.log_step(result, arrival_ns=arrival_ns)
-        self.inside_s += time.thread_time() - a
+        self.inside_s += time.thread_time() - a - self.overhead_s
 
     def log_truth(self, target_id: str, t_ns: int, state: Any) -> None:
         a = time.thread_time()
         self.sink.log_truth(target_id, t_ns, state)
-        self.inside_s += time.thread_time() - a
+        self.inside_s += time.thread_time() - a - self.overhead_s
 
     def log_text(self, t_ns: int, text: str, level: str = "INFO") -> None:
         a = time.thread_time()
         self.sink.log_text(t_ns, text, level)
-        self.inside_s += time.thread_time() - a
+        self.inside_s += time.thread_time() - a - self.overhead_s
 
     def maybe_flush(self) -> None:
         a = time.thread_time()
         self.sink.maybe_flush()
-        self.inside_s += time.thread_time() - a
+        self.inside_s += time.thread_time() - a - self.overhead_s
 
     def close(self) -> None:
         a = time.thread_time()
         self.sink.close()
-        self.inside_s += time.thread_time() - a
+        self.inside_s += time.thread_time() - a - self.overhead_s
+
+
+class _Nothing:
+    def log_truth(self, target_id: str, t_ns: int, state: Any) -> None: ...
+
+
+def timer_overhead_s(calls: int = 5000, blocks: int = 7) -> float:
+    """Seconds one _Timed call adds to inside_s with an empty sink behind it: the thread-CPU
+    clock read twice (a system call each, ~0.6 us on this machine; truth samples alone make
+    ~0.7 timed calls per measurement) and an empty call; the least of `blocks` means (the least
+    disturbed: what is taken off is not more than the timer costs)."""
+    means = []
+    for _ in range(blocks):
+        t = _Timed(_Nothing())
+        for _ in range(calls):
+            t.log_truth("", 0, None)
+        means.append(t.inside_s / calls)
+    return min(means)
 
 
 def _run(data: list, *, record: bool, tmp: Path) -> tuple[Any, int]:
@@ -165,6 +188,10 @@ def run(*, quick: bool = False, sizes: tuple[int, ...] = (10, 100, 1000)) -> dic
           f"{'steady in sink us/meas':>22} {'its meas':>8} {'window s':>8}")
     with tempfile.TemporaryDirectory() as d:  # compiled kernels, imports, Rerun: loaded before any timing
         _run(batches(20, 2.0, ns=ns), record=True, tmp=Path(d))
+    _Timed.overhead_s = timer_overhead_s()
+    print(f"(the sink's timer: {_Timed.overhead_s * 1e6:.2f} us per timed call with nothing inside, taken off "
+          "every call's time in the 'in sink' columns)")
+    out["timer_overhead_us_per_call"] = _Timed.overhead_s * 1e6
     for n_targets in sizes:
         wall_s = WARM_S + MEASURED_S
         data = batches(n_targets, wall_s * RATE[n_targets] / (PER_S * n_targets), ns=ns)
