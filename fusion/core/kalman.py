@@ -187,10 +187,10 @@ class ExtendedKalmanFilter(FilterBase):
             plan = self._plans[model]
         except (KeyError, TypeError):  # no plan yet, or a model that cannot be a key
             return self._step_unplanned(state, t_ns, z, model, R, u)
-        if R is None and u is None and plan[1] is model.R:
+        if R is None and u is None and plan.R is model.R:
             t = int(t_ns)
             d = t - int(state.t_ns)
-            packed = plan[0].get(d)
+            packed = plan.blobs.get(d)
             if packed is None and d >= 0:
                 packed = _blob(plan, d)
             if packed is not None:
