@@ -1,7 +1,7 @@
 """fusion's one C extension, fusion.core._single: the single-state filter calls of
 fusion.core.single (predict, update and the fused step), C for their call cost (the same bits as
 their numba twins). Optional: an install on a machine without a C compiler goes on without it
-and those calls run the numba twins (about 1 us slower each). Everything else about the package
+and those calls run the numba twins (1-2 us slower per call). Everything else about the package
 is in pyproject.toml."""
 
 import numpy

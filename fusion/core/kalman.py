@@ -119,12 +119,9 @@ class FilterBase:
 class ExtendedKalmanFilter(FilterBase):
     """EKF over any motion model and any measurement model (exact KF when both are linear).
 
-    Fast paths (same results to rounding, same errors): a linear motion model predicts with
-    F(dt) and Q(dt) cached per dt (fusion.core.transitions) in one compiled call; a model with
-    a compiled twin (MeasurementModel.kernel_kind) updates in one compiled call that checks z
-    and a given R itself (fusion.core.compiled_step; both calls through fusion.core.single, C
-    where it was built). Anything that call refuses, and every other model, takes the numpy
-    path below it, which raises the typed error.
+    Fast paths (the module docstring): one compiled call per predict, update or step where the
+    models have compiled twins; anything else, or anything a call refuses, takes the numpy path,
+    which raises the typed error.
     """
 
     _linear_only = False  # (KalmanFilter: update refuses a nonlinear measurement model)
