@@ -8,6 +8,8 @@ d = ( min_assignment sum min(c, |x - y|)^p + c^p / 2 (number unassigned) )^(1/p)
 With X the truth and Y the estimates, d^p splits into a localisation part (the assigned pairs'
 |x - y|^p, each < c^p), a missed part (c^p / 2 per unassigned x) and a false part (c^p / 2 per
 unassigned y): `gospa_parts`.
+Both minimise the same sum over the same cut distances (a pair at c^p costs GOSPA as much as
+leaving both free), so one assignment gives both: `ospa_gospa`.
 """
 
 from __future__ import annotations
@@ -73,6 +75,23 @@ def gospa_parts(X: Array, Y: Array, *, c: float, p: float = 2.0) -> GospaParts:
 def gospa(X: Array, Y: Array, *, c: float, p: float = 2.0) -> float:
     """GOSPA distance (alpha = 2) between point sets X (m, d) and Y (n, d)."""
     return gospa_parts(X, Y, c=c, p=p).distance
+
+
+def ospa_gospa(X: Array, Y: Array, *, c: float, p: float = 2.0) -> tuple[float, float]:
+    """(OSPA, GOSPA) between point sets X (m, d) and Y (n, d) from one assignment: the costs a of
+    its pairs give OSPA = ((sum a + c^p |n - m|) / max(m, n))^(1/p) and GOSPA = (sum of the a < c^p
+    + c^p / 2 (m + n - 2 #{a < c^p}))^(1/p)."""
+    X, Y = np.atleast_2d(X), np.atleast_2d(Y)
+    m, n = X.shape[0] if X.size else 0, Y.shape[0] if Y.size else 0
+    if m == 0 or n == 0:
+        return (0.0 if m == n else float(c)), float((c**p / 2.0 * (m + n)) ** (1.0 / p))
+    D = _cut_dist(X, Y, c, p)
+    r, k = linear_sum_assignment(D)
+    a = D[r, k]
+    kept = a < c**p
+    o = ((a.sum() + c**p * abs(n - m)) / max(m, n)) ** (1.0 / p)
+    g = (a[kept].sum() + c**p / 2.0 * (m + n - 2 * int(kept.sum()))) ** (1.0 / p)
+    return float(o), float(g)
 
 
 def nees(x_true: Array, x: Array, P: Array) -> Array:

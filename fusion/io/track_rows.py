@@ -152,8 +152,8 @@ class Rows:
                 sink.col(entity, "points", rgba=colour(role), radius=radius).extend(
                     t[mask], step[mask], arr[mask], p=W[mask][:, None, :])
         self._set_distances(sink, t, step, arr, W, conf, ids)
-        kept = self.choice.kept
-        sel = np.array([i for i, tid in enumerate(ids) if conf[i] and kept(tid)], dtype=np.int64)
+        kept = self.choice.kept_ids()
+        sel = np.flatnonzero(conf & np.isin(np.array(ids, dtype=np.int64), kept)) if kept else np.empty(0, np.int64)
         if not sel.size:
             return None
         return Stacked.of([E_[i] for i in sel.tolist()], t[sel], step[sel], arr[sel], X[sel], P[sel], std[sel],

@@ -20,14 +20,16 @@ import math
 import numpy as np
 
 from fusion.core.checks import Array
+from fusion.io.derive import eig_sym2
 
 SPACING = 1.25  # gap between neighbouring trail ellipses, as a multiple of the sum of their radii
 
 
 def radii(P: Array) -> Array:
-    """2-sigma radius of the largest axis of each position covariance (n, k, k) -> (n,)."""
-    w = np.linalg.eigvalsh(0.5 * (P + np.swapaxes(P, -1, -2)))
-    return 2.0 * np.sqrt(np.clip(w[:, -1], 0.0, None))
+    """2-sigma radius of the largest axis of each position covariance (n, k, k) -> (n,): 2 sqrt of
+    the largest eigenvalue (in closed form for k = 2: fusion.io.derive.eig_sym2)."""
+    w = eig_sym2(P)[1] if P.shape[-1] == 2 else np.linalg.eigvalsh(0.5 * (P + np.swapaxes(P, -1, -2)))[:, -1]
+    return 2.0 * np.sqrt(np.clip(w, 0.0, None))
 
 
 def pick(t_ns: Array, pos: Array, r: Array, last: tuple[int, Array, float] | None

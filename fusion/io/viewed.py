@@ -41,9 +41,10 @@ class ViewedTracks:
         """Whether tracks may still be chosen."""
         return len(self.labels) < self.limit
 
-    def kept(self, track_id: int) -> bool:
-        """Chosen, or a candidate whose rows are kept until the choice is settled."""
-        return track_id in self.labels or track_id in self._rows
+    def kept_ids(self) -> list[int]:
+        """The tracks whose rows are kept: the chosen, then the candidates (until the choice is
+        settled)."""
+        return [*self.labels, *self._rows]
 
     def candidates(self) -> set[int]:
         return set(self._rows)

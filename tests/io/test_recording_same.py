@@ -13,7 +13,11 @@ A second: estimates at the newest truth time now wait for the next record flush 
 time's truth may still come), so the live OSPA/GOSPA series, computed per flush, see each time's
 estimates together; mix's metrics/{ospa,gospa} were regenerated with that sink (same row counts).
 A third: the start markers (world/tracks/<label>/start) are near black, no longer the truth's
-green; their rows were regenerated (the colour is their only change)."""
+green; their rows were regenerated (the colour is their only change).
+A fourth: the 2-D covariance ellipses (world/tracks/<label>/{cov,trail}) are computed in closed
+form (fusion.io.derive.eig_sym2), not by LAPACK: the same rows at the same steps, each the same
+33 points (the circle's samples are symmetric under the eigenvectors' sign, so only their order
+and last bits can differ); mix's were regenerated."""
 
 from __future__ import annotations
 

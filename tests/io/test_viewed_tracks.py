@@ -33,7 +33,7 @@ def test_a_late_confirmation_before_the_horizon_takes_its_place() -> None:
     v.settle(55)
     assert list(v.labels) == [2, 3] and not v.open and v.candidates() == set()
     v.note([_est(9, 1)])  # once settled, nothing more is noted
-    assert list(v.labels) == [2, 3] and not v.kept(9)
+    assert list(v.labels) == [2, 3] and 9 not in v.kept_ids() and v.kept_ids() == [2, 3]
 
 
 def test_revisions_and_retractions_move_a_candidate() -> None:

@@ -27,9 +27,11 @@ import itertools
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from scipy.optimize import linear_sum_assignment
 
-from fusion.core.metrics import gospa, ospa
+from fusion.core.metrics import gospa, ospa, ospa_gospa
 from tests.tracking.helpers import make_tracker, positions_at
 from tests.tracking.streams import NS_PER_S, Sensor, constant_velocity, detect, in_order, scans
 
@@ -112,6 +114,8 @@ P = np.array([[0.0, 0.0], [10.0, 0.0]])
 def test_ospa_hand_computed(X: np.ndarray, Y: np.ndarray, c: float, p: float, expected: float) -> None:
     assert ospa(X, Y, c=c, p=p) == pytest.approx(expected, abs=1e-12)
     assert ospa(Y, X, c=c, p=p) == pytest.approx(expected, abs=1e-12)
+    assert ospa_gospa(X, Y, c=c, p=p)[0] == pytest.approx(expected, abs=1e-12)
+    assert ospa_gospa(Y, X, c=c, p=p)[0] == pytest.approx(expected, abs=1e-12)
 
 
 @pytest.mark.parametrize(
@@ -129,6 +133,20 @@ def test_ospa_hand_computed(X: np.ndarray, Y: np.ndarray, c: float, p: float, ex
 def test_gospa_hand_computed(X: np.ndarray, Y: np.ndarray, c: float, p: float, expected: float) -> None:
     assert gospa(X, Y, c=c, p=p) == pytest.approx(expected, abs=1e-12)
     assert gospa(Y, X, c=c, p=p) == pytest.approx(expected, abs=1e-12)
+    assert ospa_gospa(X, Y, c=c, p=p)[1] == pytest.approx(expected, abs=1e-12)
+    assert ospa_gospa(Y, X, c=c, p=p)[1] == pytest.approx(expected, abs=1e-12)
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.integers(0, 8), st.integers(0, 8), st.sampled_from([1.0, 2.0, 3.0]), st.integers(0, 2**32 - 1))
+def test_ospa_gospa_from_one_assignment_equal_their_own(m: int, n: int, p: float, seed: int) -> None:
+    """One assignment gives both distances: the same as each computed on its own, on point sets
+    of every size (empty included) with pairs near and beyond the cut-off."""
+    rng = np.random.default_rng(seed)
+    X, Y = rng.uniform(0.0, 12.0, (m, 2)), rng.uniform(0.0, 12.0, (n, 2))
+    o, g = ospa_gospa(X, Y, c=5.0, p=p)
+    assert o == pytest.approx(ospa(X, Y, c=5.0, p=p), rel=1e-12, abs=1e-12)
+    assert g == pytest.approx(gospa(X, Y, c=5.0, p=p), rel=1e-12, abs=1e-12)
 
 
 def test_gospa_parts_hand_computed() -> None:
