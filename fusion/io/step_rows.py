@@ -50,7 +50,7 @@ def associations(steps: Sequence[Step], sink: Any) -> None:
         outcome=[a.outcome for a in A],  # an Outcome is a str (StrEnum): arrow takes its value as it is
         label=["" if a.track_id is None else short_id(a.track_id) for a in A],
         gated=pa.ListArray.from_arrays(pa.array(offsets), pa.array(flat, pa.string())),
-        nis=[np.nan if a.nis is None else float(a.nis) for a in A])
+        nis=np.array([a.nis for a in A], dtype=np.float64))  # None (a birth's, clutter's) as NaN
 
 
 def measured_points(steps: Sequence[Step], sink: Any) -> None:

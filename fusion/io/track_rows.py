@@ -9,6 +9,8 @@ from __future__ import annotations
 
 from collections import defaultdict
 from collections.abc import Callable
+from itertools import repeat
+from operator import eq
 from typing import Any
 
 import numpy as np
@@ -102,7 +104,7 @@ class Rows:
             return None
         rec = sink.col("record/estimates", "record")
         d = len(self.layout)
-        ret = np.fromiter((e.status == "retracted" for e in E), dtype=bool, count=len(E))
+        ret = np.fromiter(map(eq, [e.status for e in E], repeat("retracted")), dtype=bool, count=len(E))
         if ret.any():  # x, std, error: NaN rows
             E_r = [E[i] for i in np.flatnonzero(ret).tolist()]
             nan = np.full((len(E_r), d), np.nan)
@@ -133,7 +135,7 @@ class Rows:
             target[i] = name
         matched = np.zeros(n, dtype=bool)
         matched[m_idx] = True
-        nis = np.array([np.nan if e.nis is None else e.nis for e in E_], dtype=np.float64)
+        nis = np.array([e.nis for e in E_], dtype=np.float64)  # None (a birth's) as NaN
         nis_dof = np.array([0 if e.y is None else e.y.shape[0] for e in E_], dtype=np.int64)
         ids = [e.track_id for e in E_]
         status = [e.status for e in E_]
@@ -142,7 +144,7 @@ class Rows:
                    blocks={"x": X, "std": std, "error": err}, nis=nis, nis_dof=nis_dof,
                    nees=nees, nees_dof=np.where(matched, len(self.ki), 0), target=target)
         W = derive.world(X[:, self.pi])
-        conf = np.array([s == "confirmed" for s in status], dtype=bool)
+        conf = np.fromiter(map(eq, status, repeat("confirmed")), dtype=bool, count=len(status))
         if conf.any():
             self._lo = np.minimum(self._lo, W[conf].min(axis=0))
             self._hi = np.maximum(self._hi, W[conf].max(axis=0))

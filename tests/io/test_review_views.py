@@ -9,10 +9,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from rerun.chunk import RrdReader
 
 from fusion.config import load_service_config
-from fusion.io import gain_groups, trail
+from fusion.io import derive, gain_groups, trail
 from fusion.replay import replay
 from fusion.tracking.tracker import Tracker
 from tests.io.blueprint_check import data_entities, empty_views, last_blueprint_views, selects
@@ -165,3 +167,19 @@ def test_measurement_points_let_the_estimate_line_show(radar: Path) -> None:
         assert est["SeriesLines:names"][-1] == "estimate", est  # drawn last among the lines: on top of them
         assert size < est["SeriesLines:widths"][-1] / 2, (size, est)
         assert (est["SeriesLines:colors"][-1] & 0xFF) == 255
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.floats(0.0, 1e6), st.floats(0.0, 1e6), st.floats(-1.0, 1.0))
+def test_closed_form_eigenvalues_of_2x2_covariances_are_lapacks(sa: float, sc: float, rho: float) -> None:
+    """derive.eig_sym2 (the ellipses' and trail radii's eigen-decomposition, in closed form) against
+    numpy's eigh on covariances of every shape: round, elongated, rotated, singular; the larger
+    eigenvector at the returned angle."""
+    b = rho * np.sqrt(sa * sc)
+    C = np.array([[sa, b], [b, sc]])
+    lo, hi, phi = derive.eig_sym2(C[None])
+    w = np.linalg.eigvalsh(C)
+    scale = max(abs(w).max(), 1e-300)
+    assert abs(lo[0] - w[0]) <= 1e-12 * scale and abs(hi[0] - w[1]) <= 1e-12 * scale
+    v = np.array([np.cos(phi[0]), np.sin(phi[0])])
+    assert np.linalg.norm(C @ v - hi[0] * v) <= 1e-9 * scale
