@@ -182,9 +182,14 @@ def _points(rr: Any, c: Column) -> Any:
 def _strips(rr: Any, c: Column) -> Any:
     """LineStrips3D rows: each row one strip (k, 3) (an ellipse outline)."""
     strips = c.field("s")
-    shapes = {np.shape(x) for x in strips}
-    # one (n, k, 3) array when every strip has k points (rerun converts it without per-strip work)
-    arr: Any = np.asarray(strips, dtype=np.float32) if len(shapes) == 1 else [np.asarray(x, np.float32) for x in strips]
+    # one (n, k, 3) array when every strip has k points (rerun converts it without per-strip work):
+    # what field() gives when every chunk was one; else a list of strips, their shapes looked at
+    if isinstance(strips, np.ndarray):
+        arr: Any = strips.astype(np.float32)
+    elif len({np.shape(x) for x in strips}) == 1:
+        arr = np.asarray(strips, dtype=np.float32)
+    else:
+        arr = [np.asarray(x, np.float32) for x in strips]
     n = len(arr)
     return rr.LineStrips3D.columns(strips=arr, colors=np.tile(np.array(c.style["rgba"], np.uint8), (n, 1)),
                                    radii=np.full(n, c.style.get("radius", -1.0), dtype=np.float32))

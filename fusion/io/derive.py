@@ -49,16 +49,20 @@ def eig_sym2(cov: Array) -> tuple[Array, Array, Array]:
     return h - q, h + q, 0.5 * np.arctan2(2.0 * b, a - c)
 
 
-def ellipse_points(mean: Array, cov: Array, *, n_sigma: float = 2.0) -> Array:
+def ellipse_points(mean: Array, cov: Array, *, n_sigma: float = 2.0, dims: int = 2) -> Array:
     """Points of the n-sigma ellipse of 2-D Gaussians: mean + n L u for u = (cos t, sin t) on the
     unit circle, L L' = cov with L's columns the eigenvectors scaled by the square roots of their
     eigenvalues (negative ones, from rounding, as 0), smaller first (eig_sym2).
-    mean (..., 2), cov (..., 2, 2) -> (..., 33, 2)."""
+    mean (..., 2), cov (..., 2, 2) -> (..., 33, dims): dims = 3 gives world points (z = 0,
+    as `world` would make them) without another copy of the points."""
     lo, hi, phi = eig_sym2(np.asarray(cov, dtype=np.float64))
-    s_lo, s_hi = np.sqrt(np.clip(lo, 0.0, None)), np.sqrt(np.clip(hi, 0.0, None))
+    a = n_sigma * np.sqrt(np.clip(lo, 0.0, None))[..., None]  # the smaller axis' half length
+    b = n_sigma * np.sqrt(np.clip(hi, 0.0, None))[..., None]
     cos, sin = np.cos(phi)[..., None], np.sin(phi)[..., None]
-    u, v = n_sigma * _CIRCLE[:, 0] * s_lo[..., None], n_sigma * _CIRCLE[:, 1] * s_hi[..., None]
-    return np.stack([mean[..., 0, None] - u * sin + v * cos, mean[..., 1, None] + u * cos + v * sin], axis=-1)
+    out = np.zeros((*np.shape(mean)[:-1], len(_CIRCLE), dims))
+    out[..., 0] = mean[..., 0, None] - (a * sin) * _CIRCLE[:, 0] + (b * cos) * _CIRCLE[:, 1]
+    out[..., 1] = mean[..., 1, None] + (a * cos) * _CIRCLE[:, 0] + (b * sin) * _CIRCLE[:, 1]
+    return out
 
 
 def world(p: Array) -> Array:

@@ -311,7 +311,7 @@ class Rows:
                     t[k], step[k], arr[k], c=pos[k], h=half[k], q=quat[k])
             return
         if len(self.pi) == 2:
-            strips = derive.world(derive.ellipse_points(pos, Pp))
+            strips = derive.ellipse_points(pos, Pp, dims=3)  # world points
             if keep:
                 sink.col(f"{w}/trail", "strips", rgba=colour("trail"), radius=-0.5).extend(
                     t[k], step[k], arr[k], s=strips[k])
