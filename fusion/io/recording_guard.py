@@ -35,7 +35,7 @@ class GuardedSink:
         log.error("%s; tracking and publishing go on without it", self.error)
 
     # each call written out, not dispatched by name: log_truth comes once per target per scan,
-    # and a getattr and an argument tuple cost ~0.3 us of it
+    # and the dispatch (a getattr, an argument tuple) made a call 0.24 us instead of 0.09
     def log_step(self, result: StepResult, *, arrival_ns: int | None = None) -> None:
         if self.error is None:
             try:
