@@ -97,7 +97,10 @@ class Stacked:
         if has_prior.any():
             prior[has_prior] = stack([p for p in priors if p is not None])
         meas = _present(mps)
-        meas_pos = _filled(meas, mps, np.shape(mps[int(np.argmax(meas))]) if meas.any() else (n_pos,))[:, :n_pos]
+        try:  # every measured position of one length (one tracker's position space): stacked whole
+            meas_pos = _filled(meas, mps, np.shape(mps[int(np.argmax(meas))]) if meas.any() else (n_pos,))[:, :n_pos]
+        except ValueError:  # of different lengths: each cut to n_pos first
+            meas_pos = _filled(meas, [p if p is None else p[:n_pos] for p in mps], (n_pos,))
         mode = _present(mus)
         mu = _filled(mode, mus, np.shape(mus[int(np.argmax(mode))])) if mode.any() else None
         innovated = _present(ys) & _present(Ss) & _present(niss)

@@ -4,6 +4,7 @@ NaN where a field is absent), per sensor for the innovation, through concat too.
 
 from __future__ import annotations
 
+import msgspec
 import numpy as np
 
 from fusion.io.view_rows import Stacked
@@ -59,3 +60,13 @@ def test_stacked_of_and_concat() -> None:
     _same(Stacked.concat([_of(a), _of(b)]), a + b)
     no_modes = [e for e in b if e.mode_probabilities is None]
     _same(Stacked.concat([_of(no_modes), _of(a)]), no_modes + a)
+
+
+def test_measured_positions_of_different_lengths_are_cut_to_the_position_space() -> None:
+    """A flush whose measured positions are not all of one length (the stacked fast path cannot
+    take them) gives each one's first n_pos components all the same."""
+    es = _estimates(8, 3)
+    es = [e if e.meas_pos is None or k % 2 else msgspec.structs.replace(e, meas_pos=e.meas_pos[:2])
+          for k, e in enumerate(es)]
+    assert len({e.meas_pos.shape for e in es if e.meas_pos is not None}) == 2
+    _same(_of(es), es)
