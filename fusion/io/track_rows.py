@@ -104,19 +104,22 @@ class Rows:
             return None
         rec = sink.col("record/estimates", "record")
         d = len(self.layout)
-        ret = np.fromiter(map(eq, [e.status for e in E], repeat("retracted")), dtype=bool, count=len(E))
+        status = [e.status for e in E]
+        ret = np.fromiter(map(eq, status, repeat("retracted")), dtype=bool, count=len(E))
         if ret.any():  # x, std, error: NaN rows
-            E_r = [E[i] for i in np.flatnonzero(ret).tolist()]
+            r = np.flatnonzero(ret).tolist()
+            E_r = [E[i] for i in r]
             nan = np.full((len(E_r), d), np.nan)
             ids_r = [e.track_id for e in E_r]
             rec.extend(t[ret], step[ret], arr[ret],
                        blocks={"x": nan, "std": nan, "error": nan}, track=ids_r, label=[short_id(i) for i in ids_r],
-                       sensor=[e.sensor_id for e in E_r], seq=[e.seq for e in E_r], status=[e.status for e in E_r],
+                       sensor=[e.sensor_id for e in E_r], seq=[e.seq for e in E_r], status=[status[i] for i in r],
                        revision=[e.revision for e in E_r], nis=[np.nan] * len(E_r), nis_dof=[0] * len(E_r),
                        nees=[np.nan] * len(E_r), nees_dof=[0] * len(E_r), target=[""] * len(E_r))
             if ret.all():
                 return None
-            E_ = [E[i] for i in np.flatnonzero(~ret).tolist()]
+            k = np.flatnonzero(~ret).tolist()
+            E_, status = [E[i] for i in k], [status[i] for i in k]
             t, arr, step = t[~ret], arr[~ret], step[~ret]
         else:
             E_ = E
@@ -138,7 +141,6 @@ class Rows:
         nis = np.array([e.nis for e in E_], dtype=np.float64)  # None (a birth's) as NaN
         nis_dof = np.array([0 if e.y is None else e.y.shape[0] for e in E_], dtype=np.int64)
         ids = [e.track_id for e in E_]
-        status = [e.status for e in E_]
         rec.extend(t, step, arr, track=ids, label=[short_id(i) for i in ids], sensor=[e.sensor_id for e in E_],
                    seq=[e.seq for e in E_], status=status, revision=[e.revision for e in E_],
                    blocks={"x": X, "std": std, "error": err}, nis=nis, nis_dof=nis_dof,
