@@ -204,7 +204,8 @@ def rerun(ts: TrackSet, key: ScanKey, dets: tuple[Detection, ...], ctx: ScanCont
     new = np.ones(len(dets), dtype=bool)
     new[old_j] = False
     changed = ts.changed_since(old.before, among=hint.ids if hint is not None and hint.source is old.before else None)
-    gone = old.before.ids[~member(old.before.ids, ts.ids)]
+    same_ids = ts.ids is old.before.ids or np.array_equal(ts.ids, old.before.ids)
+    gone = old.before.ids[:0] if same_ids else old.before.ids[~member(old.before.ids, ts.ids)]
     if not (changed.any() or gone.size or new.any()):  # nothing changed: the stored run stands
         if not np.array_equal(ts.ids, old.before.ids):
             return None  # the same rows in another order: the whole scan orders its output by them
@@ -232,7 +233,10 @@ def rerun(ts: TrackSet, key: ScanKey, dets: tuple[Detection, ...], ctx: ScanCont
     n_born = kept_births.size + (0 if sub is None else int(sub.tally[Tally.BIRTHS]))
     if n_born > ctx.max_tracks - len(ts):
         return None  # births the whole scan would refuse for capacity: its counts are global
-    after = _assemble(ts, rows, None if sub is None else sub.after, old, seqs[js], born_then)
+    after = _in_place(ts, rows, sub.after, A) if same_ids and sub is not None and kept_births.size == born_then.sum() \
+        else None
+    if after is None:
+        after = _assemble(ts, rows, None if sub is None else sub.after, old, seqs[js], born_then)
     touched = np.unique(np.concatenate([ts.ids[rows]] + ([] if sub is None else [sub.after.ids])))
     kept = set(ts.ids.tolist()).union(kept_births.tolist()).difference(touched.tolist())
     # the stored tally less what the re-run part counted in the stored run, plus what it counts now
@@ -260,6 +264,26 @@ def _spliced(stored: list[Association], old_j: np.ndarray, n: int, part: list[As
     for a, j in zip(part, js.tolist(), strict=True):
         out[j] = a
     return out
+
+
+def _in_place(ts: TrackSet, rows: np.ndarray, sub_after: TrackSet, A: TrackSet) -> TrackSet | None:
+    """The after-set where the re-run changed rows only (what _assemble gives then, found in a few
+    steps): ts holds the stored run's tracks in their order, no stored birth came from a re-run
+    detection (both checked by the caller), the re-run part neither deleted nor started a track
+    and every re-run track survived the stored run. Then the whole scan's order (ts's survivors,
+    then the births by seq) is A's own, and the after-set is A with the re-run rows set; None
+    where that does not hold."""
+    ids = ts.ids[rows]
+    if not np.array_equal(sub_after.ids, ids):
+        return None
+    if ids.size == 0:
+        return A  # nothing re-run holds a row: the stored after-set itself
+    if rows[-1] < len(A) and np.array_equal(A.ids[rows], ids):  # nothing deleted before them: the same rows
+        return A.with_rows(rows, sub_after, np.arange(ids.size))
+    at, found = A.rows_of(ids)
+    if not found.all():
+        return None
+    return A.with_rows(at, sub_after, np.arange(ids.size))
 
 
 def _assemble(ts: TrackSet, rows: np.ndarray, sub_after: TrackSet | None, old: Stored, rerun_seqs: np.ndarray,

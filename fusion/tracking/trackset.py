@@ -24,6 +24,7 @@ import numpy as np
 from fusion.core.checks import Array
 from fusion.core.gaussian import GaussianState
 from fusion.core.imm import IMMState
+from fusion.tracking.cv_extrapolation import extrapolated
 from fusion.tracking.id_sets import member, positions
 
 
@@ -40,12 +41,9 @@ _LABELS = {Status.TENTATIVE: "tentative", Status.CONFIRMED: "confirmed"}
 
 
 @functools.cache
-def _entries(pos_idx: tuple[int, ...], vel_idx: tuple[int, ...], n: int) -> tuple[np.ndarray, ...]:
-    """Column indices of the positions and velocities in X, and of P_pp, P_pv, P_vv per axis in
-    P flattened row-major to n * n columns."""
-    pv = tuple(zip(pos_idx, vel_idx, strict=False))
-    return (np.array(pos_idx, np.intp), np.array(vel_idx, np.intp), np.array([p * (n + 1) for p in pos_idx], np.intp),
-            np.array([p * n + v for p, v in pv], np.intp), np.array([v * (n + 1) for _, v in pv], np.intp))
+def _axes(pos_idx: tuple[int, ...], vel_idx: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray]:
+    """The position and velocity components of the state, as index arrays."""
+    return np.array(pos_idx, np.intp), np.array(vel_idx, np.intp)
 
 
 def track_id_for(sensor_id: str, seq: int, t_ns: int) -> int:
@@ -120,6 +118,7 @@ COUNTERS = ("chances", "misses", "seen_by")
 BY_ID = ("ids", "birth_t_ns", "origin_sensor", "origin_seq")
 # changed_since compares the columns a scan changes most first (a row found changed is compared no further)
 _COMPARE_ORDER = ("X", "MU", "t_ns", *(f for f in ROW_FIELDS if f not in ("X", "MU", "t_ns")))
+_FEW_ROWS = 8  # changed_since compares up to this many rows one by one (bytes), more by column passes
 
 
 class TrackSet:
@@ -203,17 +202,14 @@ class TrackSet:
     def predicted_position(self, t_ns: int, q2: float, rows: np.ndarray | None = None) -> tuple[Array, Array]:
         """Constant-velocity extrapolation of every track's position to t_ns (of tracks `rows`
         only, if given: elementwise, so the same bits as those rows of the whole), with the
-        per-axis variance P_pp + 2 dt P_pv + dt^2 P_vv + q2 dt^3 / 3 (no velocity: P_pp + q2 dt)."""
+        per-axis variance P_pp + 2 dt P_pv + dt^2 P_vv + q2 dt^3 / 3 (no velocity: P_pp + q2 dt):
+        fusion.tracking.cv_extrapolation."""
         L = self.layout
-        X, P, t = (self.X, self.P, self.t_ns) if rows is None else (self.X[rows], self.P[rows], self.t_ns[rows])
-        dt = ((t_ns - t) * 1e-9)[:, None]
-        at_p, at_v, at_pp, at_pv, at_vv = _entries(L.pos_idx, L.vel_idx, L.n_state)
-        flat = P.reshape(P.shape[0], L.n_state * L.n_state)  # P_pp (and P_pv, P_vv) per axis: one gather each
-        pos, vpp = X.take(at_p, axis=1), flat.take(at_pp, axis=1)
-        if not L.vel_idx:
-            return pos, vpp + q2 * np.abs(dt)
-        var = vpp + 2.0 * dt * flat.take(at_pv, axis=1) + dt * dt * flat.take(at_vv, axis=1) + q2 * dt**3 / 3.0
-        return pos + X.take(at_v, axis=1) * dt, np.maximum(var, 0.0)
+        at_p, at_v = _axes(L.pos_idx, L.vel_idx)
+        rows = np.arange(len(self)) if rows is None else np.ascontiguousarray(rows, dtype=np.intp)
+        dt = (t_ns - self.t_ns[rows]) * 1e-9
+        noise = q2 * dt**3 / 3.0 if L.vel_idx else np.full(rows.size, float(q2))
+        return extrapolated(self.X, self.P, rows, dt, noise, at_p, at_v)
 
     def take(self, idx: np.ndarray) -> TrackSet:
         """The rows `idx` (indices, in that order) as a set of their own."""
@@ -252,6 +248,12 @@ class TrackSet:
             at, found = rows, np.ones(n, dtype=bool)
         else:
             at, found = old.rows_of(self.ids[rows])
+        if rows.size <= _FEW_ROWS:  # a partial re-run's few rows: compared row by row, without the column passes
+            out = np.zeros(n, dtype=bool)
+            cols = [(a, getattr(old, f)) for f in _COMPARE_ORDER if (a := getattr(self, f)) is not None]
+            for r, o, ok in zip(rows.tolist(), at.tolist(), found.tolist(), strict=True):
+                out[r] = not ok or any(a[r].tobytes() != b[o].tobytes() for a, b in cols)
+            return out
         same = found.copy()
         for f in _COMPARE_ORDER:
             a = getattr(self, f)
