@@ -50,10 +50,43 @@ def _grown(e_ids: np.ndarray, e_seqs: np.ndarray, hot_ids: np.ndarray, hot_seqs:
         hot_ids, hot_seqs = more_ids, more_seqs
 
 
-def grown(e_ids: np.ndarray, e_seqs: np.ndarray, seed_ids: np.ndarray, seed_seqs: np.ndarray
-          ) -> tuple[np.ndarray, np.ndarray]:
-    """The (ids, seqs) connected to the seeds over the edges (e_ids[k], e_seqs[k]), both sorted
-    and distinct: the seeds, grown along the edges that touch them until nothing is added."""
+@njit(cache=True, fastmath=False)
+def _rerun_sets(old_ids: np.ndarray, old_seqs: np.ndarray, drop_ids: np.ndarray, add_ids: np.ndarray,
+                add_seqs: np.ndarray, seed_ids: np.ndarray, seed_seqs: np.ndarray, ts_ids: np.ndarray,
+                seqs: np.ndarray) -> tuple[np.ndarray, ...]:
+    keep = ~_member(old_ids, drop_ids)
+    new_ids = np.concatenate((old_ids[keep], add_ids))
+    new_seqs = np.concatenate((old_seqs[keep], add_seqs))
+    # the new pairs are the old ones less some, and the added ones: the union of both runs'
+    hot_ids, hot_seqs = _grown(np.concatenate((old_ids, add_ids)), np.concatenate((old_seqs, add_seqs)),
+                               np.unique(seed_ids), np.unique(seed_seqs))
+    rows = np.flatnonzero(_member(ts_ids, hot_ids))
+    js = np.flatnonzero(_member(seqs, hot_seqs))
+    # the new pairs inside the reach, as (row of the part, detection of the part), by (detection, row)
+    sub = ts_ids[rows]
+    order = np.argsort(sub, kind="mergesort")
+    inside = np.flatnonzero(_member(new_ids, sub))
+    i = order[np.searchsorted(sub[order], new_ids[inside])]
+    j = np.searchsorted(seqs[js], new_seqs[inside])
+    o = np.argsort(j * (rows.shape[0] + 1) + i, kind="mergesort")
+    return new_ids, new_seqs, rows, js, i[o], j[o]
+
+
+def rerun_sets(old_ids: np.ndarray, old_seqs: np.ndarray, drop_ids: np.ndarray, add_ids: np.ndarray,
+               add_seqs: np.ndarray, seed_ids: np.ndarray, seed_seqs: np.ndarray, ts_ids: np.ndarray,
+               seqs: np.ndarray) -> tuple[np.ndarray, ...]:
+    """The id-set steps of a partial re-run (fusion.tracking.replay) in one compiled call. The
+    stored run's coarse pairs (old_ids[k] track, old_seqs[k] detection) less those of the tracks
+    `drop_ids` (changed or gone), with the pairs `add_ids`, `add_seqs` (of the changed tracks and
+    new detections) added, are the new run's pairs. Returns:
+      new_ids, new_seqs: the new run's pairs (the kept old ones in their order, then the added);
+      rows, js:          the reach: the rows of ts_ids and positions of seqs (both ascending) of
+                         the tracks and detections connected to the seeds over the pairs of both
+                         runs (fusion.tracking.id_sets.grown);
+      ti, mj:            the new pairs inside the reach as indices into rows and js, sorted by
+                         (mj, ti), as fusion.core.association.coarse_pairs orders them.
+    `seqs` is sorted ascending; the reach is closed under the pairs (a pair with one end in it has
+    both), so every pair inside has its detection among js."""
     c = np.ascontiguousarray
-    return _grown(c(e_ids, dtype=np.int64), c(e_seqs, dtype=np.int64), np.unique(c(seed_ids, dtype=np.int64)),
-                  np.unique(c(seed_seqs, dtype=np.int64)))
+    return _rerun_sets(*(c(a, dtype=np.int64) for a in (old_ids, old_seqs, drop_ids, add_ids, add_seqs, seed_ids,
+                                                          seed_seqs, ts_ids, seqs)))

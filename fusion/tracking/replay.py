@@ -32,7 +32,7 @@ import numpy as np
 from fusion.core.association import coarse_pairs
 from fusion.core.checks import Array
 from fusion.tracking.detection import Detection
-from fusion.tracking.id_sets import grown, member, positions
+from fusion.tracking.id_sets import member, rerun_sets
 from fusion.tracking.results import Association, EventKind, Outcome, ScanKey
 from fusion.tracking.scan import Coarse, ScanContext, ScanOutcome, Tally, measured_points, run_scan
 from fusion.tracking.trackset import TrackSet
@@ -121,14 +121,13 @@ def _points(old: Stored, old_gates: Gates, dets: tuple[Detection, ...], seqs: np
     return mpos, mvar
 
 
-def _new_gates(ts: TrackSet, changed: np.ndarray, old_gates: Gates, points: tuple[Array, Array], new: np.ndarray,
-               seqs: np.ndarray, t_ns: int, ctx: ScanContext) -> Gates:
-    """The coarse pairs on ts: the stored ones of unchanged tracks and stored detections (each pair
-    is decided by its track's row and its detection alone), and those of changed tracks or new
-    detections computed."""
+def _added_pairs(ts: TrackSet, changed: np.ndarray, new: np.ndarray, points: tuple[Array, Array], seqs: np.ndarray,
+                 t_ns: int, ctx: ScanContext) -> tuple[np.ndarray, np.ndarray]:
+    """The coarse pairs the stored run could not have (by track id and detection seq): those of
+    the changed tracks with every detection, and of the other tracks with the new detections
+    (each pair is decided by its track's row and its detection alone: the rest are stored)."""
     mpos, mvar = points
-    keep = member(old_gates.ids, ts.ids[~changed])
-    ids, sq = [old_gates.ids[keep]], [old_gates.seqs[keep]]
+    ids, sq = [np.zeros(0, np.int64)], [np.zeros(0, np.int64)]  # as many pairs as may be: none
     ch, nj = np.flatnonzero(changed), np.flatnonzero(new)
     if ch.size:
         ci, cj = coarse_pairs(*ts.predicted_position(t_ns, ctx.q2, ch), mpos, mvar, k=ctx.coarse_k)
@@ -140,27 +139,7 @@ def _new_gates(ts: TrackSet, changed: np.ndarray, old_gates: Gates, points: tupl
             ci, cj = coarse_pairs(*ts.predicted_position(t_ns, ctx.q2, un), mpos[nj], mvar[nj], k=ctx.coarse_k)
             ids.append(ts.ids[un[ci]])
             sq.append(seqs[nj[cj]])
-    return Gates(np.concatenate(ids), np.concatenate(sq), mpos, mvar, seqs)
-
-
-def _reach(seed_ids: np.ndarray, seed_seqs: np.ndarray, old_gates: Gates, new_gates: Gates
-           ) -> tuple[np.ndarray, np.ndarray]:
-    """(track ids, detection seqs) in the components of the seeds over the pairs of both runs:
-    grown from the seeds along the pairs until nothing is added."""
-    return grown(np.concatenate([new_gates.ids, old_gates.ids]), np.concatenate([new_gates.seqs, old_gates.seqs]),
-                 seed_ids, seed_seqs)
-
-
-def _sub_coarse(ids: np.ndarray, sub_seqs: np.ndarray, js: np.ndarray, gates: Gates) -> Coarse:
-    """The coarse gate of the re-run part (tracks `ids`, detections `sub_seqs` = positions js):
-    the pairs of `gates` among them, as indices of the part sorted by (detection, track), as
-    coarse_pairs on the part gives them (the reach is closed under the pairs: a pair with one
-    end in it has both)."""
-    inside = member(gates.ids, ids)
-    i = positions(ids, gates.ids[inside])[0]
-    j = np.searchsorted(sub_seqs, gates.seqs[inside])
-    o = np.lexsort((i, j))
-    return Coarse(i[o].astype(np.intp), j[o].astype(np.intp), gates.mpos[js], gates.mvar[js])
+    return np.concatenate(ids), np.concatenate(sq)
 
 
 def _tally_of(assoc: list[Association], events: list, *, skips: int = 0) -> Counter:
@@ -213,14 +192,15 @@ def rerun(ts: TrackSet, key: ScanKey, dets: tuple[Detection, ...], ctx: ScanCont
         return Partial(ScanOutcome(old.after, [], [], old.associations, old.tally, old_gates.mpos), kept,
                        old_gates, Hint(old.after, np.zeros(0, np.int64)), 0, 0)
     points = _points(old, old_gates, dets, seqs, old_j, ctx, key[1])
-    new_gates = _new_gates(ts, changed, old_gates, points, new, seqs, key[0], ctx)
-    hot_ids, hot_seqs = _reach(np.concatenate([ts.ids[changed], gone]), seqs[new], old_gates, new_gates)
-    reach = np.flatnonzero(member(ts.ids, hot_ids)), np.flatnonzero(member(seqs, hot_seqs))
-    rows, js = reach
+    add_ids, add_seqs = _added_pairs(ts, changed, new, points, seqs, key[0], ctx)
+    drop = np.concatenate([ts.ids[changed], gone])  # the seeds among the tracks
+    new_ids, new_seqs, rows, js, ti, mj = rerun_sets(old_gates.ids, old_gates.seqs, drop, add_ids, add_seqs, drop,
+                                                     seqs[new], ts.ids, seqs)
+    new_gates = Gates(new_ids, new_seqs, *points, seqs)
     if rows.size == len(ts) and js.size == len(dets):
         return None  # everything is reached: the whole scan is the same work
     sub_dets = tuple(dets[j] for j in js.tolist())
-    sub = run_scan(ts.take(rows), key, sub_dets, ctx, _sub_coarse(ts.ids[rows], seqs[js], js, new_gates)) \
+    sub = run_scan(ts.take(rows), key, sub_dets, ctx, Coarse(ti, mj, points[0][js], points[1][js])) \
         if rows.size or js.size else None
     if sub is not None and (sub.tally[Tally.BIRTHS_REFUSED_CAPACITY] or sub.tally[Tally.NUMERICAL_SKIPS]):
         return None

@@ -1,7 +1,7 @@
 """The compiled and shortened parts of the scan (issue 11) give what the numpy formulations they
 replace gave, bit for bit: the IMM predict's distinct steps and its per-step F, Q kept across
 scans, the innovation per mode indexed in place, the lifecycle's per-row rules, id membership and
-the growth of a re-run's reach, the predicted positions, and a one-dimension scan's stacks."""
+a re-run's pairs, reach and part (rerun_sets), the predicted positions, and a one-dimension scan's stacks."""
 
 from __future__ import annotations
 
@@ -13,7 +13,7 @@ from fusion.core.compiled_stack import innovate_many
 from fusion.core.imm_stack import StepCache, predict_imm
 from fusion.core.modes import Mode, build_imm
 from fusion.tracking.gating import Measured
-from fusion.tracking.id_sets import grown, member
+from fusion.tracking.id_sets import member, rerun_sets
 from fusion.tracking.lifecycle_kernel import COASTED, COVARIANCE, MISSES, NOT_CONFIRMED, verdicts
 from fusion.tracking.trackset import Layout, Rows, TrackSet
 
@@ -141,18 +141,49 @@ def _grown_reference(e_ids, e_seqs, seed_ids, seed_seqs):
         hot_ids, hot_seqs = more_ids, more_seqs
 
 
-@pytest.mark.parametrize("seed", range(6))
-def test_reach_growth_is_the_loop_it_replaced(seed: int) -> None:
+def _rerun_sets_reference(old_ids, old_seqs, ts_ids, changed, gone, add_ids, add_seqs, new_seqs, seqs):
+    """The steps fusion.tracking.replay took before rerun_sets, one numpy call at a time: the new
+    pairs (_new_gates), the reach over both runs' pairs (_reach), its rows and detections, and the
+    coarse gate of the part (_sub_coarse)."""
+    keep = np.isin(old_ids, ts_ids[~changed])
+    new_ids, nseqs = np.concatenate([old_ids[keep], add_ids]), np.concatenate([old_seqs[keep], add_seqs])
+    hot_ids, hot_seqs = _grown_reference(np.concatenate([new_ids, old_ids]), np.concatenate([nseqs, old_seqs]),
+                                         np.concatenate([ts_ids[changed], gone]), new_seqs)
+    rows, js = np.flatnonzero(np.isin(ts_ids, hot_ids)), np.flatnonzero(np.isin(seqs, hot_seqs))
+    sub = ts_ids[rows]
+    inside = np.isin(new_ids, sub)
+    i = np.array([int(np.flatnonzero(sub == x)[0]) for x in new_ids[inside]], dtype=np.int64)
+    j = np.searchsorted(seqs[js], nseqs[inside])
+    o = np.lexsort((i, j))
+    return new_ids, nseqs, rows, js, i[o], j[o]
+
+
+@pytest.mark.parametrize("seed", range(12))
+def test_rerun_sets_are_the_steps_they_replaced(seed: int) -> None:
+    """A stored run's pairs over 40 tracks and 50 detections; some tracks changed, some gone,
+    new detections, added pairs of the changed tracks and new detections."""
     rng = np.random.default_rng(seed)
-    ids = rng.integers(0, 2**62, 60)
-    E = 90
-    e_ids = ids[rng.integers(0, ids.size, E)]
-    e_seqs = rng.integers(0, 80, E).astype(np.int64)
-    seed_ids = ids[rng.integers(0, ids.size, int(rng.integers(0, 3)))]
-    seed_seqs = rng.integers(0, 80, int(rng.integers(0, 3))).astype(np.int64)
-    a = grown(e_ids, e_seqs, seed_ids, seed_seqs)
-    b = _grown_reference(e_ids, e_seqs, seed_ids, seed_seqs)
-    assert _bits(*a) == _bits(*(x.astype(np.int64) for x in b))
+    before = rng.choice(2**62, 40, replace=False).astype(np.int64)
+    seqs = np.sort(rng.choice(10**6, 50, replace=False)).astype(np.int64)
+    E = int(rng.integers(0, 70))
+    old_ids, old_seqs = before[rng.integers(0, 40, E)], seqs[rng.integers(0, 45, E)]  # the last 5 detections new
+    pairs = np.unique(np.stack([old_ids, old_seqs], axis=1), axis=0)
+    old_ids, old_seqs = pairs[:, 0].copy(), pairs[:, 1].copy()
+    gone_mask = rng.random(40) < 0.1
+    ts_ids = np.concatenate([before[~gone_mask], rng.choice(2**62, 2).astype(np.int64)])  # two born since
+    changed = rng.random(ts_ids.size) < 0.15
+    changed[-2:] = True  # tracks the stored run did not have are changed
+    new = np.zeros(50, dtype=bool)
+    new[45:] = rng.random(5) < 0.6
+    A = int(rng.integers(0, 8))
+    add = np.unique(np.stack([ts_ids[changed][rng.integers(0, changed.sum(), A)], seqs[rng.integers(0, 50, A)]],
+                             axis=1), axis=0)
+    add_ids, add_seqs = add[:, 0].copy(), add[:, 1].copy()
+    drop = np.concatenate([ts_ids[changed], before[gone_mask]])
+    got = rerun_sets(old_ids, old_seqs, drop, add_ids, add_seqs, drop, seqs[new], ts_ids, seqs)
+    want = _rerun_sets_reference(old_ids, old_seqs, ts_ids, changed, before[gone_mask], add_ids, add_seqs, seqs[new],
+                                 seqs)
+    assert _bits(*got) == _bits(*(np.asarray(w).astype(np.int64) for w in want))
 
 
 @pytest.mark.parametrize("vel", [True, False], ids=["pos-vel", "pos-only"])
