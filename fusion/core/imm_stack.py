@@ -66,7 +66,7 @@ def predict_imm(imm: IMM, xs: Array, Ps: Array, mu: Array, dt: Array, steps: Ste
     M, n = xs.shape[1], xs.shape[2]
     xs, Ps, mu = _f64(xs), _f64(Ps), _f64(mu)
     du, inv = distinct(_f64(dt))  # few distinct steps: Pi, and F, Q where dt alone sets them
-    Pi = np.stack([imm.transition(d) for d in du.tolist()])[inv]
+    Pi = (np.stack([imm.transition(d) for d in du.tolist()]) if steps is None else steps.transitions(imm, du))[inv]
     c = np.einsum("km,kmj->kj", mu, Pi)
     moving = dt > 0
     sel = np.flatnonzero(moving)
@@ -100,11 +100,22 @@ class StepCache:
     motion model's F; Q of a model whose noise does not depend on the state), kept by the bytes
     of du: a sensor's scans repeat the same few steps, and the models' matrices of a step are a
     function of the step alone, so a kept one is the one the model would give (bit for bit).
-    Holds at most `size` stacks (forgets them all when full)."""
+    Also the stack of the mode transition matrices Pi(du) (IMM.transition of each step). Holds at
+    most `size` stacks of each (forgets them all when full)."""
 
     def __init__(self, size: int = 256) -> None:
         self.size = size
         self._kept: dict[bytes, list[tuple[Array | None, Array | None]]] = {}
+        self._pi: dict[bytes, Array] = {}
+
+    def transitions(self, imm: IMM, du: Array) -> Array:
+        key = du.tobytes()
+        got = self._pi.get(key)
+        if got is None:
+            if len(self._pi) >= self.size:
+                self._pi.clear()
+            got = self._pi[key] = np.stack([imm.transition(d) for d in du.tolist()])
+        return got
 
     def of(self, imm: IMM, du: Array) -> list[tuple[Array | None, Array | None]]:
         key = du.tobytes()

@@ -193,11 +193,15 @@ class Kept:
         if not self.blocks:
             e, f = np.zeros(0, dtype=np.intp), np.zeros(0)
             return Gated(e, e, f, f, f, self.parts, np.zeros((0, 2), dtype=np.intp), self.skips)
-        ti, mj, nis, cost, limit, part, row = (np.concatenate(c) for c in zip(*self.blocks, strict=True))
+        if len(self.blocks) == 1:  # one part (one measurement dimension): its columns as they are
+            ti, mj, nis, cost, limit, part, row = self.blocks[0]
+        else:
+            ti, mj, nis, cost, limit, part, row = (np.concatenate(c) for c in zip(*self.blocks, strict=True))
         o = np.lexsort((ti, mj))
-        return Gated(ti[o].astype(np.intp), mj[o].astype(np.intp), nis[o].astype(np.float64),
-                     cost[o].astype(np.float64), limit[o].astype(np.float64), self.parts,
-                     np.stack([part[o], row[o]], axis=1).astype(np.intp), self.skips)
+        return Gated(ti[o].astype(np.intp, copy=False), mj[o].astype(np.intp, copy=False),
+                     nis[o].astype(np.float64, copy=False), cost[o].astype(np.float64, copy=False),
+                     limit[o].astype(np.float64, copy=False), self.parts,
+                     np.stack([part[o], row[o]], axis=1).astype(np.intp, copy=False), self.skips)
 
 
 class PerPairGate:

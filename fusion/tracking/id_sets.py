@@ -1,7 +1,8 @@
-"""Membership of ids (track ids, detection seqs) in a set of them, as one compiled loop (numba):
-`of` sorted once, each value found by binary search. What np.isin answers; one call instead of
-the several numpy calls (sort, search, clip, compare) that cost more than the search on the
-arrays of a scan (tens to thousands of ids)."""
+"""Sets of ids (track ids, detection seqs) as compiled loops (numba). Membership: `of` sorted
+once, each value found by binary search; what np.isin answers, in one call instead of the several
+numpy calls (sort, search, clip, compare) that cost more than the search on the arrays of a scan
+(tens to thousands of ids). A partial re-run's pairs, reach and part (rerun_sets): the same,
+for the dozen steps of fusion.tracking.replay that are set logic on ids."""
 
 from __future__ import annotations
 

@@ -244,8 +244,8 @@ class TrackSet:
             out = np.zeros(n, dtype=bool)
             out[rows] = len(old) == 0
             return out
-        if among is None and self.ids.shape == old.ids.shape and np.array_equal(self.ids, old.ids):
-            at, found = rows, np.ones(n, dtype=bool)
+        if self.ids is old.ids or (self.ids.shape == old.ids.shape and np.array_equal(self.ids, old.ids)):
+            at, found = rows, np.ones(rows.size, dtype=bool)
         else:
             at, found = old.rows_of(self.ids[rows])
         if rows.size <= _FEW_ROWS:  # a partial re-run's few rows: compared row by row, without the column passes

@@ -66,6 +66,9 @@ def test_kept_steps_are_the_models_matrices() -> None:
         if F is not None:
             assert _bits(F) == _bits(np.asarray(m.F(du)))
         assert Q is not None and _bits(Q) == _bits(np.asarray(m.Q(np.zeros((3, 5)), du)))
+    steps = StepCache()
+    for _ in range(2):  # made, then kept
+        assert _bits(steps.transitions(imm, du)) == _bits(np.stack([imm.transition(d) for d in du.tolist()]))
 
 
 @pytest.mark.parametrize(("n", "m"), [(5, 2), (4, 1), (6, 3)])
