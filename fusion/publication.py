@@ -79,7 +79,7 @@ class PublishedView:
         names = tracks.layout.sensors
         ids, ts, last = tracks.ids, tracks.t_ns, tracks.last_sensor
         if confirmed_only:
-            rows = tracks.status == Status.CONFIRMED
+            rows = tracks.status == Status.CONFIRMED.value
             ids, ts, last = ids[rows], ts[rows], last[rows]
         return {(i, t, names[s]) for i, t, s in zip(ids.tolist(), ts.tolist(), last.tolist(), strict=True)}
 

@@ -44,7 +44,7 @@ class Lifecycle:
 
     def confirms(self, status: np.ndarray, hits: np.ndarray, chances: np.ndarray) -> np.ndarray:
         """Which hits, bringing tracks to `hits` in `chances` chances, confirm them."""
-        return (status == Status.TENTATIVE) & (hits >= self.cfg.confirm_m) & (chances <= self.cfg.confirm_n)
+        return (status == Status.TENTATIVE.value) & (hits >= self.cfg.confirm_m) & (chances <= self.cfg.confirm_n)
 
     def born_status(self) -> Status:
         return Status.CONFIRMED if self.cfg.confirm_m <= 1 else Status.TENTATIVE
@@ -70,7 +70,7 @@ class Lifecycle:
             pvar[hit] = after.predicted_position(t_ns, self.q2, np.flatnonzero(hit))[1]
         too_wide = pvar.max(axis=1) > cfg.max_position_std_m**2 if pvar.size else np.zeros(len(after), bool)
         chances, misses, why, coasting = verdicts(
-            hit, chance, after.chances, after.misses, after.status == Status.TENTATIVE, after.hits, after.t_ns,
+            hit, chance, after.chances, after.misses, after.status == Status.TENTATIVE.value, after.hits, after.t_ns,
             too_wide, t_ns, cfg.confirm_n, cfg.confirm_m, cfg.max_misses, self.coast_ns)
         delete = why != 0
         ids = after.ids

@@ -213,7 +213,7 @@ def _assign_confirmed_first(g: Gated, ts: TrackSet, n_meas: int) -> list[int]:
     measured both; BENCHMARKS.md)."""
     if g.ti.size == 0:
         return []
-    conf = ts.status[g.ti] == Status.CONFIRMED
+    conf = ts.status[g.ti] == Status.CONFIRMED.value  # the int: a comparison with the enum costs 3 us more
     out: list[np.ndarray] = []
     taken = np.zeros(n_meas, dtype=bool)
     for stage, likelihood in ((conf, True), (~conf, False)):

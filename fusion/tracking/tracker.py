@@ -147,7 +147,7 @@ class Tracker:
         sensor and seq of its last update). A track updated after t_ns is not predicted
         backwards: it is given at its last update (status "confirmed")."""
         ts = self._ts
-        conf = np.flatnonzero(ts.status == Status.CONFIRMED)
+        conf = np.flatnonzero(ts.status == Status.CONFIRMED.value)
         ahead = conf[ts.t_ns[conf] <= t_ns]
         X, P, mu = self.ctx.gater.predict(ts, t_ns, ahead)
         names = ts.layout.sensors
