@@ -148,6 +148,9 @@ def test_serve_prints_every_threads_stack_on_sigusr1_and_goes_on(tmp_path: Path)
     svc = start("fusion", "serve", "-c", str(SERVICE_TOML), "-l", ep, "--recordings", "rec", cwd=tmp_path)
     try:
         assert svc.stdout.readline().startswith("fusion serving namespace 'demo'")  # type: ignore[union-attr]
+        # the line is printed just before the loop starts: a status round trip first, so that the
+        # signal finds the loop running even on a loaded machine (it once came before: no loop frame)
+        assert run("fusion", "status", "-e", ep, "--json", cwd=tmp_path).returncode == 0
         svc.send_signal(signal.SIGUSR1)
         time.sleep(0.5)
         assert svc.poll() is None, "the service stopped on SIGUSR1"
