@@ -150,6 +150,9 @@ def _check_motion(m: MotionModel, name: str, X: Array, dts_s: Sequence[float], r
     n = m.ndim_state
     _indices(name, "position_indices", m.position_indices, n, empty=False)
     _indices(name, "velocity_indices", m.velocity_indices, n, empty=True)
+    if m.velocity_indices and len(m.velocity_indices) != len(m.position_indices):
+        raise ConfigError(f"model {name}: velocity_indices {m.velocity_indices!r} must name one velocity per "
+                          f"position axis (position_indices {m.position_indices!r}), or none")
     for dt in (float(d) for d in dts_s):
         for x in X:
             where = f"x={np.array2string(x, precision=4)}, dt={dt:g} s"

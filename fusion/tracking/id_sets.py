@@ -83,7 +83,7 @@ def rerun_sets(old_ids: np.ndarray, old_seqs: np.ndarray, drop_ids: np.ndarray, 
       new_ids, new_seqs: the new run's pairs (the kept old ones in their order, then the added);
       rows, js:          the reach: the rows of ts_ids and positions of seqs (both ascending) of
                          the tracks and detections connected to the seeds over the pairs of both
-                         runs (fusion.tracking.id_sets.grown);
+                         runs (grown from the seeds along the pairs until nothing is added);
       ti, mj:            the new pairs inside the reach as indices into rows and js, sorted by
                          (mj, ti), as fusion.core.association.coarse_pairs orders them.
     `seqs` is sorted ascending; the reach is closed under the pairs (a pair with one end in it has

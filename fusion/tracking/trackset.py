@@ -42,7 +42,10 @@ _LABELS = {Status.TENTATIVE: "tentative", Status.CONFIRMED: "confirmed"}
 
 @functools.cache
 def _axes(pos_idx: tuple[int, ...], vel_idx: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray]:
-    """The position and velocity components of the state, as index arrays."""
+    """The position and velocity components of the state, as index arrays (a velocity for every
+    position axis, or none)."""
+    if vel_idx and len(vel_idx) != len(pos_idx):
+        raise ValueError(f"velocity components {vel_idx} do not match the position components {pos_idx}")
     return np.array(pos_idx, np.intp), np.array(vel_idx, np.intp)
 
 

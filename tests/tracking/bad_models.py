@@ -22,3 +22,12 @@ class WrongJacobian(MotionModel):
 
     def Q(self, x, dt_s):  # type: ignore[no-untyped-def]
         return 0.1 * np.eye(2) * dt_s
+
+
+class VelocityPerAxisMissing(WrongJacobian):
+    """A 1-D position with two velocity components: the coarse gate's extrapolation pairs them
+    axis by axis."""
+
+    ndim_state = 3
+    position_indices = (0,)
+    velocity_indices = (1, 2)

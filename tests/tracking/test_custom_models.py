@@ -50,7 +50,8 @@ def test_a_wrong_jacobian_is_refused_at_load() -> None:
     ({"custom": "fusion.models.helix:Nope"}, "has no 'Nope'"),
     ({"custom": "fusion.models.helix:HelixExact", "params": {"q_pos": -1.0}}, "q_pos must be finite and >= 0"),
     ({"custom": "fusion.models.helix:HelixExact"}, "3-D position; set motion.ndim = 3"),
-], ids=["no-module", "no-class", "bad-params", "wrong-ndim"])
+    ({"custom": "tests.tracking.bad_models:VelocityPerAxisMissing"}, "one velocity per position axis"),
+], ids=["no-module", "no-class", "bad-params", "wrong-ndim", "velocity-axes"])
 def test_model_mistakes_are_refused_with_the_reason(motion: dict, message: str) -> None:
     with pytest.raises(ConfigError, match=message):
         Tracker(_config(**motion))
