@@ -202,8 +202,8 @@ def test_predicted_position_is_the_fancy_indexed_formula(vel: bool) -> None:
                        *(np.resize(getattr(rows, f), (K, *getattr(rows, f).shape[1:]))
                          for f in ("chances", "misses", "seen_by", "origin_sensor", "origin_seq", "last_sensor",
                                    "last_seq")),
-                       rng.normal(size=(K, n)), _spd(rng, n, K)), L)
-    t, q2 = 2 * 10**9, 0.3
+                       rng.normal(size=(K, n)), _spd(rng, n, K) * (np.arange(K) % 3 != 0)[:, None, None]), L)
+    t, q2 = 2 * 10**9, 0.3  # every third P zero: the variance is the noise term alone, to its last bit
     pos, var = ts.predicted_position(t, q2)
     X, P = ts.X, ts.P
     dt = ((t - ts.t_ns) * 1e-9)[:, None]
