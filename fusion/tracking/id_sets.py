@@ -52,10 +52,10 @@ def _grown(e_ids: np.ndarray, e_seqs: np.ndarray, hot_ids: np.ndarray, hot_seqs:
 
 
 @njit(cache=True, fastmath=False)
-def _rerun_sets(old_ids: np.ndarray, old_seqs: np.ndarray, drop_ids: np.ndarray, add_ids: np.ndarray,
-                add_seqs: np.ndarray, seed_ids: np.ndarray, seed_seqs: np.ndarray, ts_ids: np.ndarray,
-                seqs: np.ndarray) -> tuple[np.ndarray, ...]:
-    keep = ~_member(old_ids, drop_ids)
+def _rerun_sets(old_ids: np.ndarray, old_seqs: np.ndarray, seed_ids: np.ndarray, add_ids: np.ndarray,
+                add_seqs: np.ndarray, seed_seqs: np.ndarray, ts_ids: np.ndarray, seqs: np.ndarray
+                ) -> tuple[np.ndarray, ...]:
+    keep = ~_member(old_ids, seed_ids)
     new_ids = np.concatenate((old_ids[keep], add_ids))
     new_seqs = np.concatenate((old_seqs[keep], add_seqs))
     # the new pairs are the old ones less some, and the added ones: the union of both runs'
@@ -73,13 +73,14 @@ def _rerun_sets(old_ids: np.ndarray, old_seqs: np.ndarray, drop_ids: np.ndarray,
     return new_ids, new_seqs, rows, js, i[o], j[o]
 
 
-def rerun_sets(old_ids: np.ndarray, old_seqs: np.ndarray, drop_ids: np.ndarray, add_ids: np.ndarray,
-               add_seqs: np.ndarray, seed_ids: np.ndarray, seed_seqs: np.ndarray, ts_ids: np.ndarray,
-               seqs: np.ndarray) -> tuple[np.ndarray, ...]:
+def rerun_sets(old_ids: np.ndarray, old_seqs: np.ndarray, seed_ids: np.ndarray, add_ids: np.ndarray,
+               add_seqs: np.ndarray, seed_seqs: np.ndarray, ts_ids: np.ndarray, seqs: np.ndarray
+               ) -> tuple[np.ndarray, ...]:
     """The id-set steps of a partial re-run (fusion.tracking.replay) in one compiled call. The
     stored run's coarse pairs (old_ids[k] track, old_seqs[k] detection) less those of the tracks
-    `drop_ids` (changed or gone), with the pairs `add_ids`, `add_seqs` (of the changed tracks and
-    new detections) added, are the new run's pairs. Returns:
+    `seed_ids` (changed or gone: the seeds among the tracks), with the pairs `add_ids`, `add_seqs`
+    (of the changed tracks and new detections: the seeds `seed_seqs`) added, are the new run's
+    pairs. Returns:
       new_ids, new_seqs: the new run's pairs (the kept old ones in their order, then the added);
       rows, js:          the reach: the rows of ts_ids and positions of seqs (both ascending) of
                          the tracks and detections connected to the seeds over the pairs of both
@@ -89,5 +90,5 @@ def rerun_sets(old_ids: np.ndarray, old_seqs: np.ndarray, drop_ids: np.ndarray, 
     `seqs` is sorted ascending; the reach is closed under the pairs (a pair with one end in it has
     both), so every pair inside has its detection among js."""
     c = np.ascontiguousarray
-    return _rerun_sets(*(c(a, dtype=np.int64) for a in (old_ids, old_seqs, drop_ids, add_ids, add_seqs, seed_ids,
-                                                          seed_seqs, ts_ids, seqs)))
+    return _rerun_sets(*(c(a, dtype=np.int64) for a in (old_ids, old_seqs, seed_ids, add_ids, add_seqs, seed_seqs,
+                                                          ts_ids, seqs)))

@@ -14,9 +14,9 @@ history's Entry). Run again, it has the set B' and detections D' (D and the late
             decides each component alone) or per row (update, initiation, lifecycle), so its
             results are the stored ones: its rows are copied from A, its estimates, events and
             associations from the stored outcome.
-The after-set is assembled in the order the whole scan builds it (the surviving rows of B' in
-their order, then the births in detection order), so the result is bit-identical to running the
-whole scan. Where a rule counts over the whole scan the whole scan is run instead (`None`):
+The after-set is assembled (fusion.tracking.splice) in the order the whole scan builds it (the
+surviving rows of B' in their order, then the births in detection order), so the result is
+bit-identical to running the whole scan. Where a rule counts over the whole scan the whole scan is run instead (`None`):
 capacity (the old run refused a birth for max_tracks, or the births would not fit now) and
 numerical skips in the old run (the batched gate then ran the whole dimension group pair by
 pair, which agrees with the batched math to 1e-12, not bit for bit).
@@ -35,6 +35,7 @@ from fusion.tracking.detection import Detection
 from fusion.tracking.id_sets import member, rerun_sets
 from fusion.tracking.results import Association, EventKind, Outcome, ScanKey
 from fusion.tracking.scan import Coarse, ScanContext, ScanOutcome, Tally, measured_points, run_scan
+from fusion.tracking.splice import after_in_place, assembled_after, spliced
 from fusion.tracking.trackset import TrackSet
 
 
@@ -127,7 +128,7 @@ def _added_pairs(ts: TrackSet, changed: np.ndarray, new: np.ndarray, points: tup
     the changed tracks with every detection, and of the other tracks with the new detections
     (each pair is decided by its track's row and its detection alone: the rest are stored)."""
     mpos, mvar = points
-    ids, sq = [np.zeros(0, np.int64)], [np.zeros(0, np.int64)]  # as many pairs as may be: none
+    ids, sq = [np.zeros(0, np.int64)], [np.zeros(0, np.int64)]  # (none, if nothing changed or is new)
     ch, nj = np.flatnonzero(changed), np.flatnonzero(new)
     if ch.size:
         ci, cj = coarse_pairs(*ts.predicted_position(t_ns, ctx.q2, ch), mpos, mvar, k=ctx.coarse_k)
@@ -193,8 +194,8 @@ def rerun(ts: TrackSet, key: ScanKey, dets: tuple[Detection, ...], ctx: ScanCont
                        old_gates, Hint(old.after, np.zeros(0, np.int64)), 0, 0)
     points = _points(old, old_gates, dets, seqs, old_j, ctx, key[1])
     add_ids, add_seqs = _added_pairs(ts, changed, new, points, seqs, key[0], ctx)
-    drop = np.concatenate([ts.ids[changed], gone])  # the seeds among the tracks
-    new_ids, new_seqs, rows, js, ti, mj = rerun_sets(old_gates.ids, old_gates.seqs, drop, add_ids, add_seqs, drop,
+    seeds = np.concatenate([ts.ids[changed], gone])  # the tracks whose pairs change
+    new_ids, new_seqs, rows, js, ti, mj = rerun_sets(old_gates.ids, old_gates.seqs, seeds, add_ids, add_seqs,
                                                      seqs[new], ts.ids, seqs)
     new_gates = Gates(new_ids, new_seqs, *points, seqs)
     if rows.size == len(ts) and js.size == len(dets):
@@ -213,10 +214,11 @@ def rerun(ts: TrackSet, key: ScanKey, dets: tuple[Detection, ...], ctx: ScanCont
     n_born = kept_births.size + (0 if sub is None else int(sub.tally[Tally.BIRTHS]))
     if n_born > ctx.max_tracks - len(ts):
         return None  # births the whole scan would refuse for capacity: its counts are global
-    after = _in_place(ts, rows, sub.after, A) if same_ids and sub is not None and kept_births.size == born_then.sum() \
-        else None
+    after = None
+    if same_ids and sub is not None and kept_births.size == born_then.sum():
+        after = after_in_place(ts, rows, sub.after, A)
     if after is None:
-        after = _assemble(ts, rows, None if sub is None else sub.after, old, seqs[js], born_then)
+        after = assembled_after(ts, rows, None if sub is None else sub.after, A, seqs[js], born_then)
     touched = np.unique(np.concatenate([ts.ids[rows]] + ([] if sub is None else [sub.after.ids])))
     kept = set(ts.ids.tolist()).union(kept_births.tolist()).difference(touched.tolist())
     # the stored tally less what the re-run part counted in the stored run, plus what it counts now
@@ -225,78 +227,7 @@ def rerun(ts: TrackSet, key: ScanKey, dets: tuple[Detection, ...], ctx: ScanCont
     assoc, estimates, events = old.associations, [], []
     if sub is not None:
         tally.update(sub.tally)
-        assoc = _spliced(old.associations, old_j, len(dets), sub.associations, js)
+        assoc = spliced(old.associations, old_j, len(dets), sub.associations, js)
         estimates, events = sub.estimates, sub.events
     return Partial(ScanOutcome(after, estimates, events, assoc, tally, new_gates.mpos), kept, new_gates,
                    Hint(old.after, touched), int(rows.size), int(js.size))
-
-
-def _spliced(stored: list[Association], old_j: np.ndarray, n: int, part: list[Association], js: np.ndarray
-             ) -> list[Association]:
-    """The associations of the n detections in their order: the stored ones (of the detections
-    at positions old_j) with those of the re-run part (positions js) in their place."""
-    if len(stored) == n:
-        out = list(stored)
-    else:
-        out = [None] * n  # type: ignore[list-item]
-        for k, j in enumerate(old_j.tolist()):
-            out[j] = stored[k]
-    for a, j in zip(part, js.tolist(), strict=True):
-        out[j] = a
-    return out
-
-
-def _in_place(ts: TrackSet, rows: np.ndarray, sub_after: TrackSet, A: TrackSet) -> TrackSet | None:
-    """The after-set where the re-run changed rows only (what _assemble gives then, found in a few
-    steps): ts holds the stored run's tracks in their order, no stored birth came from a re-run
-    detection (both checked by the caller), the re-run part neither deleted nor started a track
-    and every re-run track survived the stored run. Then the whole scan's order (ts's survivors,
-    then the births by seq) is A's own, and the after-set is A with the re-run rows set; None
-    where that does not hold."""
-    ids = ts.ids[rows]
-    if not np.array_equal(sub_after.ids, ids):
-        return None
-    if ids.size == 0:
-        return A  # nothing re-run holds a row: the stored after-set itself
-    if rows[-1] < len(A) and np.array_equal(A.ids[rows], ids):  # nothing deleted before them: the same rows
-        return A.with_rows(rows, sub_after, np.arange(ids.size))
-    at, found = A.rows_of(ids)
-    if not found.all():
-        return None
-    return A.with_rows(at, sub_after, np.arange(ids.size))
-
-
-def _assemble(ts: TrackSet, rows: np.ndarray, sub_after: TrackSet | None, old: Stored, rerun_seqs: np.ndarray,
-              born_then: np.ndarray) -> TrackSet:
-    """The after-set in the whole scan's order: the survivors of ts in ts's order (re-run rows from
-    sub_after, the others from old.after: a kept row survives now iff it survived then), then the
-    births by detection seq (those of re-run detections from sub_after, the others' from old.after).
-    Where that is old.after's rows in their order with some rows from sub_after (the usual case:
-    nothing born or deleted differently), old.after's columns are copied with those rows set, and
-    the columns a track's id decides are old.after's own arrays (track sets are immutable).
-    `born_then`: which rows of old.after the stored run started."""
-    A = old.after
-    rerun = np.zeros(len(ts), dtype=bool)
-    rerun[rows] = True
-    off = 0 if sub_after is None else len(sub_after)
-    at_a, in_a = A.rows_of(ts.ids)
-    src, ok = off + at_a, in_a & ~rerun
-    born_a = np.flatnonzero(born_then & ~member(A.origin_seq, rerun_seqs))
-    born_idx, born_seq = [off + born_a], [A.origin_seq[born_a]]
-    if sub_after is not None:
-        at_s, in_s = sub_after.rows_of(ts.ids)
-        src = np.where(rerun, at_s, src)
-        ok = np.where(rerun, in_s, ok)
-        born_s = np.flatnonzero(~member(sub_after.ids, ts.ids))
-        born_idx.append(born_s)
-        born_seq.append(sub_after.origin_seq[born_s])
-    bi, bs = np.concatenate(born_idx), np.concatenate(born_seq)
-    idx = np.concatenate([src[ok], bi[np.argsort(bs, kind="stable")]]).astype(np.intp)
-    if sub_after is None:
-        return A.take(idx - off)
-    fresh = np.flatnonzero(idx < off)  # the rows taken from sub_after
-    from_a = idx >= off
-    if idx.size == len(A) and (idx[from_a] - off == np.flatnonzero(from_a)).all() \
-            and (sub_after.ids[idx[fresh]] == A.ids[fresh]).all():
-        return A.with_rows(fresh, sub_after, idx[fresh])
-    return sub_after.joined(A).take(idx)

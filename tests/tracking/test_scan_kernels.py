@@ -183,7 +183,7 @@ def test_rerun_sets_are_the_steps_they_replaced(seed: int) -> None:
                              axis=1), axis=0)
     add_ids, add_seqs = add[:, 0].copy(), add[:, 1].copy()
     drop = np.concatenate([ts_ids[changed], before[gone_mask]])
-    got = rerun_sets(old_ids, old_seqs, drop, add_ids, add_seqs, drop, seqs[new], ts_ids, seqs)
+    got = rerun_sets(old_ids, old_seqs, drop, add_ids, add_seqs, seqs[new], ts_ids, seqs)
     want = _rerun_sets_reference(old_ids, old_seqs, ts_ids, changed, before[gone_mask], add_ids, add_seqs, seqs[new],
                                  seqs)
     assert _bits(*got) == _bits(*(np.asarray(w).astype(np.int64) for w in want))
