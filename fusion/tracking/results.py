@@ -8,10 +8,10 @@ revisions and retractions are applied the way a consumer applies them:
 Only Replay records and the arrival counts (replays, replayed scans, rescans, late_applied)
 describe how the data arrived, and they are named so.
 
-The per-measurement records (Estimate, TrackEvent, MeasuredPoint, Association) are frozen
-msgspec Structs without cyclic-GC tracking (they hold arrays, tuples and scalars, never
-themselves): built thousands of times per batch, they cost ~0.4 us each where a frozen
-dataclass cost ~3-5 us.
+The per-measurement records (Estimate, TrackEvent, Association) and a scan's new measured
+points (ScanPoints, one per scan: arrays, not a record per measurement) are frozen msgspec Structs
+without cyclic-GC tracking (they hold arrays, tuples and scalars, never themselves): built
+thousands of times per batch, they cost ~0.4 us each where a frozen dataclass cost ~3-5 us.
 """
 
 from __future__ import annotations
@@ -116,12 +116,13 @@ class TrackEvent(msgspec.Struct, frozen=True, gc=False):
         return TrackEvent(self.kind, self.track_id, self.t_ns, self.reason, True)
 
 
-class MeasuredPoint(msgspec.Struct, frozen=True, gc=False):
-    """A newly accepted measurement, in world Cartesian coordinates (for recordings)."""
+class ScanPoints(msgspec.Struct, frozen=True, gc=False):
+    """The newly accepted measurements of one scan, in world Cartesian coordinates (for
+    recordings): their seqs (int64, k) and positions (k, d), in the scan's detection order."""
 
     sensor_id: str
     t_ns: int
-    seq: int
+    seq: Array
     position: Array
 
 
@@ -202,7 +203,7 @@ class StepResult:
     applied: int
     replays: tuple[Replay, ...]
     associations: tuple[Association, ...]
-    measurements: tuple[MeasuredPoint, ...] = ()
+    measurements: tuple[ScanPoints, ...] = ()  # one per scan that took new measurements
     # sensor time before which nothing can change any more after this call (Tracker.horizon_ns;
     # None before the window has one): what a consumer derived from earlier rows is final
     horizon_ns: int | None = None

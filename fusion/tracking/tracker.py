@@ -40,9 +40,9 @@ from fusion.tracking.results import (
     Counts,
     DeletionReason,
     Estimate,
-    MeasuredPoint,
     Replay,
     ScanKey,
+    ScanPoints,
     StepResult,
     TrackEvent,
 )
@@ -179,7 +179,7 @@ class Tracker:
         estimates: list[Estimate] = []
         events: list[TrackEvent] = []
         assoc = []
-        points: list[MeasuredPoint] = []
+        points: list[ScanPoints] = []
         ts = rw.start
         hint = None
         for key in rw.keys:
@@ -192,9 +192,7 @@ class Tracker:
             kept = part.kept if part is not None else frozenset()
             hint = part.hint if part is not None else None
             if arrived:
-                new = {d.seq for d in arrived}
-                points.extend(MeasuredPoint(d.sensor_id, d.t_ns, d.seq, out.positions[j])
-                              for j, d in enumerate(dets) if d.seq in new)
+                points.append(_new_points(key, dets, arrived, prev is not None, out.positions))
             entry = Entry(key, dets, ts, tally=out.tally, associations=out.associations,
                           gates=part.gates if part is not None else gates_of_run(ts, dets, out))
             estimates.extend(revise(entry, prev, out.estimates, kept))
@@ -275,3 +273,15 @@ def withdrawals_first(events: list[TrackEvent]) -> tuple[TrackEvent, ...]:
     if not any(ev.retracted for ev in events):
         return tuple(events)
     return tuple([ev for ev in events if ev.retracted] + [ev for ev in events if not ev.retracted])
+
+
+def _new_points(key: ScanKey, dets: tuple[Detection, ...], arrived: list[Detection], again: bool,
+                positions: np.ndarray) -> ScanPoints:
+    """The world points (the scan's `positions`, in the order of `dets`) of the measurements that
+    arrived in this call: all of the scan's when it runs for the first time, the new ones when it
+    runs again with more (a seq is accepted once: admission refuses duplicates)."""
+    seqs = np.fromiter((d.seq for d in dets), dtype=np.int64, count=len(dets))
+    if again:
+        new = np.isin(seqs, np.fromiter((d.seq for d in arrived), dtype=np.int64, count=len(arrived)))
+        seqs, positions = seqs[new], positions[new]
+    return ScanPoints(key[1], key[0], seqs, positions)

@@ -5,7 +5,7 @@ a seq used in one step and not in another."""
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 import pyarrow as pa
@@ -14,7 +14,7 @@ from fusion.io import step_rows
 from fusion.io.columns import Column, Ragged, stack
 from fusion.io.derive import world
 from fusion.io.labels import short_id
-from fusion.tracking.results import Association, MeasuredPoint, Outcome
+from fusion.tracking.results import Association, Outcome, ScanPoints
 
 _USED = (Outcome.UPDATED,)
 _SEQ_MASK = (1 << 64) - 1
@@ -39,7 +39,19 @@ def _ref_associations(steps: Sequence[Any], sink: Any) -> None:
         nis=[np.nan if a.nis is None else float(a.nis) for a in A])
 
 
+class _Point(NamedTuple):  # a measured point on its own, as the tracker once reported it (the reference's input)
+    sensor_id: str
+    t_ns: int
+    seq: int
+    position: np.ndarray
+
+
+def _points(ms: Sequence[ScanPoints]) -> list[_Point]:
+    return [_Point(sp.sensor_id, sp.t_ns, q, p) for sp in ms for q, p in zip(sp.seq.tolist(), sp.position, strict=True)]
+
+
 def _ref_measured_points(steps: Sequence[Any], sink: Any) -> None:
+    steps = [(_points(ms), As, step, arr) for ms, As, step, arr in steps]
     used_keys: dict[str, set[int]] = {}
     for _, As, step, _ in steps:
         for a in As:
@@ -92,15 +104,25 @@ def _steps(seed: int) -> list[Any]:
             s = sensors[k % len(sensors)]
             tk = t + (k % 2) * 10  # two scan times in one step now and then
             seq = int(rng.integers(0, 8))  # repeats: the same seq used in one step, not in another
-            ms.append(MeasuredPoint(s, tk, seq, rng.normal(size=2 if s == "radar1" else 3)))
+            ms.append(_Point(s, tk, seq, rng.normal(size=2 if s == "radar1" else 3)))
             if rng.random() < 0.8:
                 oc = outcomes[int(rng.integers(0, len(outcomes)))]
                 tid = None if oc is not Outcome.UPDATED and rng.random() < 0.5 else int(rng.integers(1, 2**62))
                 gated = tuple(int(g) for g in rng.integers(1, 2**62, size=int(rng.integers(0, 3))))
                 As.append(Association(s, tk, seq, oc, tid, None if rng.random() < 0.3 else float(rng.random()),
                                       gated))
-        out.append((tuple(ms), tuple(As), step, None if step % 4 == 0 else t + 5))
+        out.append((_scans(ms), tuple(As), step, None if step % 4 == 0 else t + 5))
     return out
+
+
+def _scans(ms: list[_Point]) -> tuple[ScanPoints, ...]:
+    """The points of a step as the tracker reports them: one ScanPoints per (sensor, time), in
+    the order each first appears, its points in their order."""
+    groups: dict[tuple[str, int], list[_Point]] = {}
+    for p in ms:
+        groups.setdefault((p.sensor_id, p.t_ns), []).append(p)
+    return tuple(ScanPoints(s, t, np.array([p.seq for p in g], dtype=np.int64), np.stack([p.position for p in g]))
+                 for (s, t), g in groups.items())
 
 
 def _rows(c: Column) -> list[Any]:

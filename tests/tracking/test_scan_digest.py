@@ -71,9 +71,10 @@ def _feed(h: hashlib._Hash, r: StepResult) -> None:
         h.update(repr(ev.key + (ev.retracted,)).encode())
     for a in r.associations:
         h.update(repr((a.sensor_id, a.t_ns, a.seq, a.outcome.value, a.track_id, a.nis, a.gated)).encode())
-    for p in r.measurements:
-        h.update(repr((p.sensor_id, p.t_ns, p.seq)).encode())
-        _arr(h, p.position)
+    for sp in r.measurements:  # point by point, as when each was a record of its own (the digests stand)
+        for seq, position in zip(sp.seq.tolist(), sp.position, strict=True):
+            h.update(repr((sp.sensor_id, sp.t_ns, seq)).encode())
+            _arr(h, position)
 
 
 def digest(name: str, seed: int = 11) -> str:
