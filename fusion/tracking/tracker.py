@@ -191,10 +191,11 @@ class Tracker:
             out = part.outcome if part is not None else run_scan(ts, key, dets, self.ctx)
             kept = part.kept if part is not None else frozenset()
             hint = part.hint if part is not None else None
+            gates = part.gates if part is not None else gates_of_run(ts, dets, out)
             if arrived:
-                points.append(_new_points(key, dets, arrived, prev is not None, out.positions))
-            entry = Entry(key, dets, ts, tally=out.tally, associations=out.associations,
-                          gates=part.gates if part is not None else gates_of_run(ts, dets, out))
+                points.append(_new_points(key, dets, arrived, prev is not None, out.positions,
+                                          None if gates is None else gates.det_seqs))
+            entry = Entry(key, dets, ts, tally=out.tally, associations=out.associations, gates=gates)
             estimates.extend(revise(entry, prev, out.estimates, kept))
             events.extend(revise_events(entry, prev, out.events, kept))
             assoc.extend(out.associations)
@@ -276,11 +277,13 @@ def withdrawals_first(events: list[TrackEvent]) -> tuple[TrackEvent, ...]:
 
 
 def _new_points(key: ScanKey, dets: tuple[Detection, ...], arrived: list[Detection], again: bool,
-                positions: np.ndarray) -> ScanPoints:
+                positions: np.ndarray, seqs: np.ndarray | None) -> ScanPoints:
     """The world points (the scan's `positions`, in the order of `dets`) of the measurements that
     arrived in this call: all of the scan's when it runs for the first time, the new ones when it
-    runs again with more (a seq is accepted once: admission refuses duplicates)."""
-    seqs = np.fromiter((d.seq for d in dets), dtype=np.int64, count=len(dets))
+    runs again with more (a seq is accepted once: admission refuses duplicates). `seqs`: dets'
+    seqs where the scan's gates hold them already (Gates.det_seqs), else None."""
+    if seqs is None:
+        seqs = np.fromiter((d.seq for d in dets), dtype=np.int64, count=len(dets))
     if again:
         new = np.isin(seqs, np.fromiter((d.seq for d in arrived), dtype=np.int64, count=len(arrived)))
         seqs, positions = seqs[new], positions[new]
