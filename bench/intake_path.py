@@ -97,8 +97,8 @@ def _child(tree: str, targets: int, seconds: float, reps: int) -> dict[str, floa
     timed("drain", drain, queue)
     tr = Tracker(cfg.tracker)
     d = len(tr.layout)
-    ests = [Estimate(i % targets, t0 + i, "radar1", i, np.full(d, float(i)), np.eye(d), "confirmed", 0, 1.0, None,
-                     None, np.array([0.5, 0.5])) for i in range(n)]
+    ests = [Estimate(i % targets, t0 + i, "radar1", i, np.full(d, float(i)), np.eye(d), "confirmed", 0, 1.0,
+                     np.array([0.5, 0.5])) for i in range(n)]
     enc = wire.estimate_encoder(tr.layout, tr.model_name)
     timed("encode", lambda _: [enc(e) for e in ests])
     return out

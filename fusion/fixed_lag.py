@@ -89,7 +89,7 @@ class FixedLagSmoother:
                 continue
             rev = 0 if prev is None else prev[0] + 1
             sent[s] = (rev, x, P, e.status)
-            out.append(Estimate(tid, s[0], s[1], e.seq, x, P, e.status, rev, None, None, None, e.mode_probabilities))
+            out.append(Estimate(tid, s[0], s[1], e.seq, x, P, e.status, rev, None, e.mode_probabilities))
         start = slots[lo] if lo < len(slots) else first_changed
         for s in sorted(k for k in sent if k >= min(start, first_changed) and k not in want):
             rev, x_old, _, _ = sent[s]

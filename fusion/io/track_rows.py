@@ -139,7 +139,7 @@ class Rows:
         matched = np.zeros(n, dtype=bool)
         matched[m_idx] = True
         nis = np.array([e.nis for e in E_], dtype=np.float64)  # None (a birth's) as NaN
-        nis_dof = np.array([0 if e.y is None else e.y.shape[0] for e in E_], dtype=np.int64)
+        nis_dof = np.array([0 if (r := e.review) is None or r.y is None else r.y.shape[1] for e in E_], dtype=np.int64)
         ids = [e.track_id for e in E_]
         rec.extend(t, step, arr, track=ids, label=[short_id(i) for i in ids], sensor=[e.sensor_id for e in E_],
                    seq=[e.seq for e in E_], status=status, revision=[e.revision for e in E_],

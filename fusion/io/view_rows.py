@@ -26,7 +26,7 @@ import numpy as np
 
 from fusion.core.checks import Array
 from fusion.io.columns import stack
-from fusion.tracking.results import Estimate
+from fusion.tracking.results import Estimate, Review
 
 # Updates' per-row blocks after `rows`, and Stacked's per-row arrays: positional, then keyword
 _UPDATE_BLOCKS = ("Y", "S", "nis", "gain", "H", "Pm")
@@ -66,6 +66,39 @@ def _filled(present: Array, values: Sequence[Array | None], shape: tuple[int, ..
     return out
 
 
+class _Blocks:
+    """The distinct Review blocks of some estimates (fusion.tracking.results.Review: a scan's
+    estimates share theirs) and each estimate's block and row in it."""
+
+    __slots__ = ("blocks", "row", "which")
+
+    def __init__(self, reviews: Sequence[Review | None], rows: Sequence[int]) -> None:
+        n = len(reviews)
+        keys = np.fromiter(map(id, reviews), dtype=np.int64, count=n)  # the same block, the same id
+        _, first, self.which = np.unique(keys, return_index=True, return_inverse=True)
+        self.blocks = [reviews[i] for i in first.tolist()]
+        self.row = np.fromiter(rows, dtype=np.int64, count=n)
+
+    def has(self, name: str) -> Array:
+        """(n,) bool: whether each estimate's block has the field."""
+        h = np.array([b is not None and getattr(b, name) is not None for b in self.blocks], dtype=bool)
+        return h[self.which] if len(self.which) else np.zeros(0, dtype=bool)
+
+    def take(self, name: str, at: Array, *, cut: int | None = None) -> Array:
+        """The field's rows of the estimates `at` (each with the field), stacked (a new array):
+        the blocks concatenated whole (their first `cut` columns), then the rows picked."""
+        parts: list[Array] = []
+        off = np.zeros(len(self.blocks), dtype=np.int64)
+        o = 0
+        for k, b in enumerate(self.blocks):
+            a = None if b is None else getattr(b, name)
+            if a is not None:
+                parts.append(a if cut is None else a[:, :cut])
+                off[k] = o
+                o += len(a)
+        return np.concatenate(parts)[off[self.which[at]] + self.row[at]]
+
+
 class Stacked:
     """The viewed tracks' rows of one record flush (or of several, concatenated): see the module
     docstring. `ids` (n,) int64 track ids; `conf` (n,) whether each is confirmed."""
@@ -85,39 +118,45 @@ class Stacked:
     def of(cls, estimates: list[Estimate], t: Array, step: Array, arr: Array, X: Array, P: Array, std: Array,
            err: Array, matched: Array, nees: Array, TX: Array, W: Array, *, conf: Array, n_pos: int) -> Stacked:
         """The rows of `estimates` (the arrays' rows, in their order; every array a copy of its
-        own), with the first `n_pos` components of their measured positions."""
+        own), with the first `n_pos` components of their measured positions. What the
+        estimates' Review blocks hold is read block by block (`_Blocks`), not estimate by
+        estimate."""
         d = X.shape[1]
         # one list per field: a comprehension per field is faster than one pass unzipped
         E = estimates
-        priors, mps, ys, Ss = [e.prior_x for e in E], [e.meas_pos for e in E], [e.y for e in E], [e.S for e in E]
-        niss, sensors, Hs = [e.nis for e in E], [e.sensor_id for e in E], [e.H for e in E]
-        Pms, mus = [e.prior_P for e in E], [e.mode_probabilities for e in E]
-        has_prior = _present(priors)
+        niss, sensors, mus = [e.nis for e in E], [e.sensor_id for e in E], [e.mode_probabilities for e in E]
+        rv = _Blocks([e.review for e in E], [e.row for e in E])
         prior = X.copy()
+        has_prior = rv.has("prior_x")
         if has_prior.any():
-            prior[has_prior] = stack([p for p in priors if p is not None])
-        meas = _present(mps)
-        try:  # every measured position of one length (one tracker's position space): stacked whole
-            meas_pos = _filled(meas, mps, np.shape(mps[int(np.argmax(meas))]) if meas.any() else (n_pos,))[:, :n_pos]
-        except ValueError:  # of different lengths: each cut to n_pos first
-            meas_pos = _filled(meas, [p if p is None else p[:n_pos] for p in mps], (n_pos,))
+            prior[has_prior] = rv.take("prior_x", np.flatnonzero(has_prior))
+        meas = rv.has("meas_pos")
+        if meas.any():
+            at = np.flatnonzero(meas)
+            got = rv.take("meas_pos", at, cut=n_pos)
+            meas_pos = np.full((len(E), got.shape[1]), np.nan)
+            meas_pos[at] = got
+        else:
+            meas_pos = np.full((len(E), n_pos), np.nan)
         mode = _present(mus)
         mu = _filled(mode, mus, np.shape(mus[int(np.argmax(mode))])) if mode.any() else None
-        innovated = _present(ys) & _present(Ss) & _present(niss)
+        innovated = rv.has("y") & rv.has("S") & _present(niss)
+        gains = rv.has("H") & rv.has("prior_P")
         names = np.array(sensors, dtype=object)
         updates = {}
         for sensor in sorted(set(sensors)):
             ks = np.flatnonzero(innovated & (names == sensor))
             if not ks.size:
                 continue
-            pick = ks.tolist()
-            Y = stack([ys[k] for k in pick])
+            Y = rv.take("y", ks)
             m = Y.shape[1]
-            H_, Pm_ = [Hs[k] for k in pick], [Pms[k] for k in pick]
-            gain = _present(H_) & _present(Pm_)
-            updates[sensor] = Updates(ks, Y, stack([Ss[k] for k in pick]),
-                                      np.array([niss[k] for k in pick], dtype=np.float64), gain,
-                                      _filled(gain, H_, (m, d)), _filled(gain, Pm_, (d, d)))
+            gain = gains[ks]
+            H = np.full((ks.size, m, d), np.nan)
+            Pm = np.full((ks.size, d, d), np.nan)
+            if gain.any():
+                H[gain], Pm[gain] = rv.take("H", ks[gain]), rv.take("prior_P", ks[gain])
+            updates[sensor] = Updates(ks, Y, rv.take("S", ks), np.array([niss[k] for k in ks.tolist()],
+                                                                         dtype=np.float64), gain, H, Pm)
         ids = np.array([e.track_id for e in E], dtype=np.int64)
         return cls(t, step, arr, X, P, std, err, matched, nees, TX, W, ids=ids, conf=conf, prior=prior, meas=meas,
                    meas_pos=meas_pos, mode=mode, mu=mu, updates=updates)

@@ -29,6 +29,7 @@ from fusion.core.imm import Filter, IMMState
 from fusion.core.measurement import MeasurementModel
 from fusion.errors import NumericalError
 from fusion.tracking.controls import InputTimeline
+from fusion.tracking.results import Review
 from fusion.tracking.trackset import TrackSet
 
 LOG_2PI = math.log(2.0 * math.pi)
@@ -56,19 +57,31 @@ class Part:
 
 @dataclass(frozen=True)
 class Taken:
-    """Posteriors of the chosen pairs, in the order asked: stacked states, and per pair the
-    review arrays (their shapes differ with the measurement's dimension)."""
+    """Posteriors of the chosen pairs, in the order asked: stacked states, and the review arrays
+    stacked per measurement dimension (their shapes differ with it): `review` holds, per part
+    the pairs came from, (at: the positions of its pairs among those asked, prior_x, prior_P,
+    y, S, H: their rows, in that order)."""
 
     X: Array
     P: Array
     MX: Array | None
     MP: Array | None
     MU: Array | None
-    prior_x: list[Array]
-    prior_P: list[Array]
-    y: list[Array]
-    S: list[Array]
-    H: list[Array]
+    review: list[tuple[Array, Array, Array, Array, Array, Array]]
+
+    def reviews(self, meas_pos: Array) -> tuple[list[Review], list[int]]:
+        """Each pair's Review block and its row in it, with the pairs' measured positions
+        `meas_pos` (k, p): one block per measurement dimension, shared by its pairs."""
+        if len(self.review) == 1:  # one dimension: every pair's row of one block, in order
+            at, px, pP, y, S, H = self.review[0]
+            return [Review(meas_pos, px, pP, y, S, H)] * at.size, list(range(at.size))
+        blocks: list[Review] = [None] * len(meas_pos)  # type: ignore[list-item]
+        rows = [0] * len(meas_pos)
+        for at, px, pP, y, S, H in self.review:
+            rv = Review(meas_pos[at], px, pP, y, S, H)
+            for r, a in enumerate(at.tolist()):
+                blocks[a], rows[a] = rv, r
+        return blocks, rows
 
 
 @dataclass(frozen=True)
@@ -124,8 +137,9 @@ class Gated:
         if len(self.parts) == 1:  # every pair from one part (one measurement dimension): its rows
             part, rows = self.parts[0], self.where[pairs, 1] if k else np.zeros(0, dtype=np.intp)
             MX, MP, MU = (None if a is None else a[rows] for a in (part.MX, part.MP, part.MU))
-            return Taken(part.X[rows], part.P[rows], MX, MP, MU, list(part.prior_x[rows]), list(part.prior_P[rows]),
-                         list(part.y[rows]), list(part.S[rows]), list(part.H[rows]))
+            review = [(np.arange(k, dtype=np.intp), part.prior_x[rows], part.prior_P[rows], part.y[rows], part.S[rows],
+                       part.H[rows])]
+            return Taken(part.X[rows], part.P[rows], MX, MP, MU, review)
         n = self.parts[0].X.shape[1] if self.parts else 0
         imm = bool(self.parts) and self.parts[0].MX is not None
         X, P = np.empty((k, n)), np.empty((k, n, n))
@@ -134,25 +148,16 @@ class Gated:
             M = self.parts[0].MX.shape[1]  # type: ignore[union-attr]
             MX, MP, MU = np.empty((k, M, n)), np.empty((k, M, n, n)), np.empty((k, M))
         where = self.where[pairs] if k else np.zeros((0, 2), dtype=np.intp)
-        px: list[Array] = [None] * k  # type: ignore[list-item]
-        pP, ys, Ss, Hs = list(px), list(px), list(px), list(px)
-        groups = np.unique(where[:, 0]).tolist()
-        for g in groups:
+        review = []
+        for g in np.unique(where[:, 0]).tolist():
             at = np.flatnonzero(where[:, 0] == g)
             rows = where[at, 1]
             part = self.parts[g]
             X[at], P[at] = part.X[rows], part.P[rows]
             if imm:
                 MX[at], MP[at], MU[at] = part.MX[rows], part.MP[rows], part.MU[rows]  # type: ignore[index]
-            review = (list(part.prior_x[rows]), list(part.prior_P[rows]), list(part.y[rows]), list(part.S[rows]),
-                      list(part.H[rows]))
-            if len(groups) == 1:  # every pair from one part: the rows in order
-                px, pP, ys, Ss, Hs = review
-                break
-            for out, rows_of in zip((px, pP, ys, Ss, Hs), review, strict=True):
-                for a, v in zip(at.tolist(), rows_of, strict=True):
-                    out[a] = v
-        return Taken(X, P, MX, MP, MU, px, pP, ys, Ss, Hs)
+            review.append((at, part.prior_x[rows], part.prior_P[rows], part.y[rows], part.S[rows], part.H[rows]))
+        return Taken(X, P, MX, MP, MU, review)
 
 
 class Gater(Protocol):

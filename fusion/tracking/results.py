@@ -8,10 +8,12 @@ revisions and retractions are applied the way a consumer applies them:
 Only Replay records and the arrival counts (replays, replayed scans, rescans, late_applied)
 describe how the data arrived, and they are named so.
 
-The per-measurement records (Estimate, TrackEvent, Association) and a scan's new measured
-points (ScanPoints, one per scan: arrays, not a record per measurement) are frozen msgspec Structs
-without cyclic-GC tracking (they hold arrays, tuples and scalars, never themselves): built
-thousands of times per batch, they cost ~0.4 us each where a frozen dataclass cost ~3-5 us.
+The per-measurement records (Estimate, TrackEvent, Association), a scan's new measured points
+(ScanPoints, one per scan: arrays, not a record per measurement) and what a review reads of a
+scan's estimates beside their posteriors (Review, a block per scan that its estimates refer to
+by row) are frozen msgspec Structs without cyclic-GC tracking (they hold arrays, tuples,
+scalars and, an Estimate, its Review: never a cycle): built thousands of times per batch, they
+cost ~0.4 us each where a frozen dataclass cost ~3-5 us.
 """
 
 from __future__ import annotations
@@ -55,11 +57,41 @@ class Outcome(StrEnum):
     CAPACITY = "capacity"  # no track could be started: max_tracks reached
 
 
+class Review(msgspec.Struct, frozen=True, gc=False):
+    """What a review reads of some of a scan's estimates beside their posteriors, stacked: one
+    block per scan for the updates of one measurement dimension (their measured positions,
+    prior x and P, innovation y with its covariance S, and the measurement Jacobian H at the
+    prior: the gain is K = prior_P H' S^-1), and one for the scan's births (their measured
+    positions; no prior, no innovation). An estimate refers to its row of its block
+    (Estimate.review, Estimate.row): a scan's estimates share their blocks, instead of holding
+    a view of each array (six objects per estimate to make and to free)."""
+
+    meas_pos: Array  # (k, p): world position of each measurement used (the association)
+    prior_x: Array | None = None  # (k, d)
+    prior_P: Array | None = None  # (k, d, d)
+    y: Array | None = None  # (k, m)
+    S: Array | None = None  # (k, m, m)
+    H: Array | None = None  # (k, m, d)
+
+
+def _review_row(name: str) -> property:
+    """An Estimate's row of its Review block's field `name` (None if it has no block, or the
+    block not that field)."""
+
+    def row_of(e: Estimate) -> Array | None:
+        r = e.review
+        a = None if r is None else getattr(r, name)
+        return None if a is None else a[e.row]
+
+    return property(row_of, doc=f"Its row of its Review block's {name} (None where it has none).")
+
+
 class Estimate(msgspec.Struct, frozen=True, gc=False):
     """A track's posterior after a scan, or its retraction (status "retracted", empty x and P).
 
-    prior_x, prior_P: the prediction to t_ns; y, S: innovation and its covariance; H: the
-    measurement Jacobian at the prior (the gain is K = prior_P H' S^-1). All None at a birth.
+    `review`, `row`: its row of its scan's Review block (None for a retraction or a
+    prediction); prior_x, prior_P, y, S, H and meas_pos read it (None at a birth, but for
+    meas_pos).
     """
 
     track_id: int
@@ -71,30 +103,32 @@ class Estimate(msgspec.Struct, frozen=True, gc=False):
     status: str  # "tentative" | "confirmed" | "retracted" | "predicted" (Tracker.predict)
     revision: int
     nis: float | None
-    y: Array | None
-    S: Array | None
     mode_probabilities: Array | None = None
-    meas_pos: Array | None = None  # world position of the measurement used (the association)
-    prior_x: Array | None = None
-    prior_P: Array | None = None
-    H: Array | None = None
+    review: Review | None = None
+    row: int = 0
 
     @property
     def key(self) -> EstimateKey:
         return (self.track_id, self.t_ns, self.sensor_id)
 
+    # its rows of its Review block (None where it has none)
+    meas_pos = _review_row("meas_pos")
+    prior_x = _review_row("prior_x")
+    prior_P = _review_row("prior_P")
+    y = _review_row("y")
+    S = _review_row("S")
+    H = _review_row("H")
+
     def with_revision(self, revision: int) -> Estimate:
         if revision == self.revision:
             return self
         return Estimate(self.track_id, self.t_ns, self.sensor_id, self.seq, self.x, self.P, self.status, revision,
-                        self.nis, self.y, self.S, self.mode_probabilities, self.meas_pos, self.prior_x,
-                        self.prior_P, self.H)
+                        self.nis, self.mode_probabilities, self.review, self.row)
 
     @classmethod
     def retraction(cls, key: EstimateKey, revision: int) -> Estimate:
         track_id, t_ns, sensor_id = key
-        return cls(track_id, t_ns, sensor_id, -1, np.empty(0), np.empty((0, 0)), "retracted", revision,
-                   None, None, None)
+        return cls(track_id, t_ns, sensor_id, -1, np.empty(0), np.empty((0, 0)), "retracted", revision, None)
 
 
 class TrackEvent(msgspec.Struct, frozen=True, gc=False):

@@ -34,6 +34,7 @@ from fusion.tracking.results import (
     Estimate,
     EventKind,
     Outcome,
+    Review,
     ScanKey,
     TrackEvent,
 )
@@ -129,15 +130,17 @@ def run_scan(ts: TrackSet, key: ScanKey, dets: tuple[Detection, ...], ctx: ScanC
     nis = gated.nis[pairs].tolist()
     mj_list = mj.tolist()
     MU = [None] * ti.size if taken.MU is None else list(taken.MU)
+    reviews, rows = taken.reviews(mpos[mj])
     estimates = [
-        Estimate(tid, t_ns, sensor_id, seq, x, P, _LABELS[st], 0, v, y, S, mu, mp, px, pP, H)
-        for tid, seq, st, x, P, v, y, S, mu, mp, px, pP, H in zip(
-            est_ids, seqs.tolist(), status.tolist(), list(taken.X), list(taken.P), nis, taken.y, taken.S, MU,
-            list(mpos[mj]), taken.prior_x, taken.prior_P, taken.H, strict=True)
+        Estimate(tid, t_ns, sensor_id, seq, x, P, _LABELS[st], 0, v, mu, rv, r)
+        for tid, seq, st, x, P, v, mu, rv, r in zip(
+            est_ids, seqs.tolist(), status.tolist(), list(taken.X), list(taken.P), nis, MU, reviews, rows,
+            strict=True)
     ]
 
     assoc, born, born_j = _births_and_associations(ts, key, dets, gated, dict(zip(mj_list, pairs, strict=True)),
                                                    ctx, sm, mpos, tally)
+    born_review = Review(mpos[born_j]) if born.ids.size else None
     for b in range(born.ids.size):
         tid = int(born.ids[b])
         events.append(TrackEvent(EventKind.BORN, tid, t_ns))
@@ -145,8 +148,8 @@ def run_scan(ts: TrackSet, key: ScanKey, dets: tuple[Detection, ...], ctx: ScanC
             events.append(TrackEvent(EventKind.CONFIRMED, tid, t_ns))
             tally[Tally.CONFIRMATIONS] += 1
         estimates.append(Estimate(tid, t_ns, sensor_id, int(born.last_seq[b]), born.X[b], born.P[b],
-                                  Status(int(born.status[b])).label, 0, None, None, None,
-                                  None if born.MU is None else born.MU[b], mpos[born_j[b]]))
+                                  Status(int(born.status[b])).label, 0, None,
+                                  None if born.MU is None else born.MU[b], born_review, b))
     tally[Tally.BIRTHS] += born.ids.size
 
     updated = ts.derive(update=(ti, changes))

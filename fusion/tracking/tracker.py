@@ -152,12 +152,12 @@ class Tracker:
         X, P, mu = self.ctx.gater.predict(ts, t_ns, ahead)
         names = ts.layout.sensors
         out = [Estimate(int(ts.ids[i]), t_ns, names[int(ts.last_sensor[i])], int(ts.last_seq[i]), X[k], P[k],
-                        "predicted", 0, None, None, None, None if mu is None else mu[k])
+                        "predicted", 0, None, None if mu is None else mu[k])
                for k, i in enumerate(ahead.tolist())]
         for i in conf[ts.t_ns[conf] > t_ns].tolist():
             st = ts.state(i)
             out.append(Estimate(int(ts.ids[i]), st.t_ns, names[int(ts.last_sensor[i])], int(ts.last_seq[i]), st.x,
-                                st.P, "confirmed", 0, None, None, None, getattr(st, "mu", None)))
+                                st.P, "confirmed", 0, None, getattr(st, "mu", None)))
         return sorted(out, key=lambda e: e.track_id)
 
     # ---- the algorithm ----------------------------------------------------------------------

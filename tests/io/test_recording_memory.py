@@ -17,6 +17,7 @@ from fusion.config import CartesianSensorConfig, LifecycleConfig, MotionConfig, 
 from fusion.io.rerun_sink import RerunSink
 from fusion.io.view_rows import Stacked
 from fusion.tracking.detection import Detection
+from fusion.tracking.results import Review
 from fusion.tracking.tracker import Tracker
 
 TARGETS = 20
@@ -44,9 +45,13 @@ def _tracker() -> Tracker:
                                  lifecycle=LifecycleConfig(confirm_m=2, confirm_n=3)))
 
 
+# an estimate's arrays: its own fields' and its rows of its Review block (Estimate's properties)
+ARRAYS = ("x", "P", "mode_probabilities") + Review.__struct_fields__
+
+
 def _stacked_arrays(e) -> list[weakref.ref]:
     """Weak references to the step's stacked arrays that e's arrays are rows of (x, P, y, S, H, ...)."""
-    return [weakref.ref(a.base) for a in (getattr(e, f) for f in e.__struct_fields__)
+    return [weakref.ref(a.base) for a in (getattr(e, f) for f in ARRAYS)
             if isinstance(a, np.ndarray) and a.base is not None]
 
 
@@ -63,7 +68,7 @@ def test_viewed_rows_are_arrays_of_their_own_with_the_same_values() -> None:
                    np.zeros(n, bool), np.zeros(n), X, X, conf=np.ones(n, bool), n_pos=2)
     kept = [s.prior, s.meas_pos] + [a for u in s.updates.values() for a in (u.Y, u.S, u.H, u.Pm)]
     for e in updated:
-        for f in e.__struct_fields__:
+        for f in ARRAYS:
             a = getattr(e, f)
             if isinstance(a, np.ndarray):
                 assert not any(np.shares_memory(a, k) for k in kept), f

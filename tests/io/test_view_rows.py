@@ -8,7 +8,7 @@ import msgspec
 import numpy as np
 
 from fusion.io.view_rows import Stacked
-from fusion.tracking.results import Estimate
+from fusion.tracking.results import Estimate, Review
 
 
 def _estimates(n: int, seed: int) -> list[Estimate]:
@@ -16,11 +16,12 @@ def _estimates(n: int, seed: int) -> list[Estimate]:
     out = []
     for k in range(n):
         born = k % 4 == 0  # a birth: no prior, innovation or gain
+        # each its own one-row Review block (in the tracker a scan's estimates share theirs), or none
+        review = None if k % 7 == 3 else Review(rng.normal(size=(1, 3))) if born else Review(
+            rng.normal(size=(1, 3)), rng.normal(size=(1, 5)), np.eye(5)[None], rng.normal(size=(1, 2)), np.eye(2)[None],
+            None if k % 5 == 1 else rng.normal(size=(1, 2, 5)))
         out.append(Estimate(k, 10 * k, "radar1" if k % 2 else "cam1", k, rng.normal(size=5), np.eye(5), "confirmed", 0,
-                            None if born else float(rng.random()), None if born else rng.normal(size=2),
-                            None if born else np.eye(2), None if k % 3 else rng.random(2),
-                            None if born else rng.normal(size=3), None if born else rng.normal(size=5),
-                            None if born else np.eye(5), None if born or k % 5 == 1 else rng.normal(size=(2, 5))))
+                            None if born else float(rng.random()), None if k % 3 else rng.random(2), review))
     return out
 
 
@@ -66,7 +67,8 @@ def test_measured_positions_of_different_lengths_are_cut_to_the_position_space()
     """A flush whose measured positions are not all of one length (the stacked fast path cannot
     take them) gives each one's first n_pos components all the same."""
     es = _estimates(8, 3)
-    es = [e if e.meas_pos is None or k % 2 else msgspec.structs.replace(e, meas_pos=e.meas_pos[:2])
+    es = [e if e.meas_pos is None or k % 2 else
+          msgspec.structs.replace(e, review=msgspec.structs.replace(e.review, meas_pos=e.review.meas_pos[:, :2]))
           for k, e in enumerate(es)]
     assert len({e.meas_pos.shape for e in es if e.meas_pos is not None}) == 2
     _same(_of(es), es)

@@ -21,7 +21,7 @@ from tests.io.scenario_run import record_scenario
 
 
 def _est(track: int, t: int, status: str = "confirmed", revision: int = 0, sensor: str = "s") -> Estimate:
-    return Estimate(track, t, sensor, 0, np.zeros(2), np.eye(2), status, revision, None, None, None, None)
+    return Estimate(track, t, sensor, 0, np.zeros(2), np.eye(2), status, revision, None)
 
 
 def test_a_late_confirmation_before_the_horizon_takes_its_place() -> None:

@@ -77,7 +77,7 @@ def test_run_scan_given_its_coarse_gate_is_the_scan(state: tuple[Tracker, list])
 
 
 def _est(tid: int, x: float) -> Estimate:
-    return Estimate(tid, 5, "s", 1, np.array([x]), np.eye(1), "confirmed", 0, None, None, None)
+    return Estimate(tid, 5, "s", 1, np.array([x]), np.eye(1), "confirmed", 0, None)
 
 
 def test_revise_keeps_the_stored_estimates_of_kept_tracks_and_retracts_the_others() -> None:

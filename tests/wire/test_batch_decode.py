@@ -162,7 +162,7 @@ def test_estimates_encoder_is_estimate_encoder_of_each() -> None:
     ests = [Estimate(int(rng.integers(0, 2**40)), int(rng.integers(-2**62, 2**62)), "radar1",
                      int(rng.integers(-1, 2**40)), rng.normal(size=5), rng.normal(size=(5, 5)),
                      str(rng.choice(["confirmed", "tentative", "retracted", "predicted"])), int(rng.integers(0, 9)),
-                     None if i % 3 else float(rng.normal()), None, None,
+                     None if i % 3 else float(rng.normal()),
                      None if i % 2 else rng.dirichlet([1.0, 1.0]))
             for i in range(200)]
     ests.append(Estimate.retraction((7, 5, "cam1"), 3))  # no state: an empty layout

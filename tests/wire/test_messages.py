@@ -274,11 +274,10 @@ def test_the_estimate_encoder_writes_the_estimate_message(case: str) -> None:
     layout = ("x", "vx", "y", "vy")
     x, P = np.arange(4.0), np.arange(16.0).reshape(4, 4)
     e = {
-        "imm": Estimate(7, 10**18, "radar1", 3, x, P, "confirmed", 2, 1.25, None, None, np.array([0.25, 0.75])),
-        "cv-no-nis": Estimate(7, -5, "cam1", 0, x, P, "tentative", 0, None, None, None),
-        "retracted-empty": Estimate(2**62, 5, "cam1", 9, np.zeros(0), np.zeros((0, 0)), "retracted", 4, None, None,
-                                    None),
-        "negative-seq": Estimate(1, 5, "cam1", -1, x, P, "predicted", 0, None, None, None),
+        "imm": Estimate(7, 10**18, "radar1", 3, x, P, "confirmed", 2, 1.25, np.array([0.25, 0.75])),
+        "cv-no-nis": Estimate(7, -5, "cam1", 0, x, P, "tentative", 0, None),
+        "retracted-empty": Estimate(2**62, 5, "cam1", 9, np.zeros(0), np.zeros((0, 0)), "retracted", 4, None),
+        "negative-seq": Estimate(1, 5, "cam1", -1, x, P, "predicted", 0, None),
     }[case]
     want = m.encode(wire.estimate_message(e, layout=layout, model="imm_cv"))
     assert wire.estimate_encoder(layout, "imm_cv")(e) == want
