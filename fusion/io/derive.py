@@ -60,8 +60,16 @@ def ellipse_points(mean: Array, cov: Array, *, n_sigma: float = 2.0, dims: int =
     b = n_sigma * np.sqrt(np.clip(hi, 0.0, None))[..., None]
     cos, sin = np.cos(phi)[..., None], np.sin(phi)[..., None]
     out = np.zeros((*np.shape(mean)[:-1], len(_CIRCLE), dims))
-    out[..., 0] = mean[..., 0, None] - (a * sin) * _CIRCLE[:, 0] + (b * cos) * _CIRCLE[:, 1]
-    out[..., 1] = mean[..., 1, None] + (a * cos) * _CIRCLE[:, 0] + (b * sin) * _CIRCLE[:, 1]
+    # x = m0 - (a sin) c0 + (b cos) c1 and y = m1 + (a cos) c0 + (b sin) c1, the operations in
+    # that order, written into `out` through one scratch array (n points each: a temporary per
+    # product was most of the time, on memory not touched before)
+    tmp = np.empty(out.shape[:-1])
+    for k, (w0, w1, op) in enumerate(((a * sin, b * cos, np.subtract), (a * cos, b * sin, np.add))):
+        x = out[..., k]
+        np.multiply(w0, _CIRCLE[:, 0], out=tmp)
+        op(mean[..., k, None], tmp, out=x)
+        np.multiply(w1, _CIRCLE[:, 1], out=tmp)
+        np.add(x, tmp, out=x)
     return out
 
 

@@ -17,10 +17,9 @@ import numpy as np
 
 from fusion.core.checks import Array
 from fusion.io import derive, gain_groups, trail
-from fusion.io.columns import stack
 from fusion.io.labels import short_id
 from fusion.io.palette import colour, series_colours
-from fusion.io.view_rows import Stacked
+from fusion.io.view_rows import ReviewBlocks, Stacked
 from fusion.io.viewed import ViewedTracks
 from fusion.tracking.results import Estimate
 
@@ -123,8 +122,9 @@ class Rows:
             t, arr, step = t[~ret], arr[~ret], step[~ret]
         else:
             E_ = E
-        X = stack([e.x for e in E_])
-        P = stack([e.P for e in E_])
+        rv = ReviewBlocks.of(E_)  # the estimates' posteriors and review arrays, block by block
+        X = rv.rows_of("X", E_, "x")
+        P = rv.rows_of("P", E_, "P")
         std = np.sqrt(np.clip(np.diagonal(P, axis1=1, axis2=2), 0.0, None))
         n = len(E_)
         m_idx, TX, targets = derive.match_truth(t, X, P, self.truth, self.pi)
@@ -139,7 +139,7 @@ class Rows:
         matched = np.zeros(n, dtype=bool)
         matched[m_idx] = True
         nis = np.array([e.nis for e in E_], dtype=np.float64)  # None (a birth's) as NaN
-        nis_dof = np.array([0 if (r := e.review) is None or r.y is None else r.y.shape[1] for e in E_], dtype=np.int64)
+        nis_dof = rv.width("y")
         ids = [e.track_id for e in E_]
         rec.extend(t, step, arr, track=ids, label=[short_id(i) for i in ids], sensor=[e.sensor_id for e in E_],
                    seq=[e.seq for e in E_], status=status, revision=[e.revision for e in E_],
@@ -162,7 +162,7 @@ class Rows:
             return None
         return Stacked.of([E_[i] for i in sel.tolist()], t[sel], step[sel], arr[sel], X[sel], P[sel], std[sel],
                           err[sel], matched[sel], nees[sel], TX_full(TX, m_idx, X.shape)[sel], W[sel], conf=conf[sel],
-                          n_pos=len(self.pi))
+                          n_pos=len(self.pi), blocks=rv.subset(sel))
 
     def views(self, batches: list[Stacked], sink: Any, *, pause: Callable[[], None]) -> None:
         """The viewed tracks' time series and cursor marks, from their rows of the record flushes

@@ -66,18 +66,42 @@ def _filled(present: Array, values: Sequence[Array | None], shape: tuple[int, ..
     return out
 
 
-class _Blocks:
+class ReviewBlocks:
     """The distinct Review blocks of some estimates (fusion.tracking.results.Review: a scan's
     estimates share theirs) and each estimate's block and row in it."""
 
     __slots__ = ("blocks", "row", "which")
 
-    def __init__(self, reviews: Sequence[Review | None], rows: Sequence[int]) -> None:
+    def __init__(self, blocks: list[Review | None], which: Array, row: Array) -> None:
+        self.blocks, self.which, self.row = blocks, which, row
+
+    @classmethod
+    def of(cls, estimates: Sequence[Estimate]) -> ReviewBlocks:
+        reviews = [e.review for e in estimates]
         n = len(reviews)
         keys = np.fromiter(map(id, reviews), dtype=np.int64, count=n)  # the same block, the same id
-        _, first, self.which = np.unique(keys, return_index=True, return_inverse=True)
-        self.blocks = [reviews[i] for i in first.tolist()]
-        self.row = np.fromiter(rows, dtype=np.int64, count=n)
+        _, first, which = np.unique(keys, return_index=True, return_inverse=True)
+        return cls([reviews[i] for i in first.tolist()], which,
+                   np.fromiter([e.row for e in estimates], dtype=np.int64, count=n))
+
+    def subset(self, rows: Array) -> ReviewBlocks:
+        """The same for the estimates `rows` (indices)."""
+        return ReviewBlocks(self.blocks, self.which[rows], self.row[rows])
+
+    def width(self, name: str) -> Array:
+        """(n,) int64: the length of each estimate's row of the field (its block's second axis; 0
+        where it has none): the innovation's dimension, of "y"."""
+        w = np.array([0 if b is None or getattr(b, name) is None else getattr(b, name).shape[1] for b in self.blocks],
+                     dtype=np.int64)
+        return w[self.which] if len(self.which) else np.zeros(0, dtype=np.int64)
+
+    def rows_of(self, name: str, estimates: Sequence[Estimate], attr: str) -> Array:
+        """The field's row of every estimate, stacked: from the blocks when every estimate has
+        one (the tracker's), else each estimate's own attribute `attr` (x or P; the same values)."""
+        has = self.has(name)
+        if has.all():
+            return self.take(name, np.arange(len(has)))
+        return stack([getattr(e, attr) for e in estimates])
 
     def has(self, name: str) -> Array:
         """(n,) bool: whether each estimate's block has the field."""
@@ -116,16 +140,17 @@ class Stacked:
 
     @classmethod
     def of(cls, estimates: list[Estimate], t: Array, step: Array, arr: Array, X: Array, P: Array, std: Array,
-           err: Array, matched: Array, nees: Array, TX: Array, W: Array, *, conf: Array, n_pos: int) -> Stacked:
+           err: Array, matched: Array, nees: Array, TX: Array, W: Array, *, conf: Array, n_pos: int,
+           blocks: ReviewBlocks | None = None) -> Stacked:
         """The rows of `estimates` (the arrays' rows, in their order; every array a copy of its
         own), with the first `n_pos` components of their measured positions. What the
-        estimates' Review blocks hold is read block by block (`_Blocks`), not estimate by
-        estimate."""
+        estimates' Review blocks hold is read block by block (`blocks`, theirs, or found here),
+        not estimate by estimate."""
         d = X.shape[1]
         # one list per field: a comprehension per field is faster than one pass unzipped
         E = estimates
         niss, sensors, mus = [e.nis for e in E], [e.sensor_id for e in E], [e.mode_probabilities for e in E]
-        rv = _Blocks([e.review for e in E], [e.row for e in E])
+        rv = ReviewBlocks.of(E) if blocks is None else blocks
         prior = X.copy()
         has_prior = rv.has("prior_x")
         if has_prior.any():

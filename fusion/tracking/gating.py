@@ -71,14 +71,15 @@ class Taken:
 
     def reviews(self, meas_pos: Array) -> tuple[list[Review], list[int]]:
         """Each pair's Review block and its row in it, with the pairs' measured positions
-        `meas_pos` (k, p): one block per measurement dimension, shared by its pairs."""
+        `meas_pos` (k, p): one block per measurement dimension, shared by its pairs (with one
+        dimension, X and P are the block: the pairs' estimates are views of their rows)."""
         if len(self.review) == 1:  # one dimension: every pair's row of one block, in order
             at, px, pP, y, S, H = self.review[0]
-            return [Review(meas_pos, px, pP, y, S, H)] * at.size, list(range(at.size))
+            return [Review(self.X, self.P, meas_pos, px, pP, y, S, H)] * at.size, list(range(at.size))
         blocks: list[Review] = [None] * len(meas_pos)  # type: ignore[list-item]
         rows = [0] * len(meas_pos)
         for at, px, pP, y, S, H in self.review:
-            rv = Review(meas_pos[at], px, pP, y, S, H)
+            rv = Review(self.X[at], self.P[at], meas_pos[at], px, pP, y, S, H)
             for r, a in enumerate(at.tolist()):
                 blocks[a], rows[a] = rv, r
         return blocks, rows

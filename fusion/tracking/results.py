@@ -58,20 +58,28 @@ class Outcome(StrEnum):
 
 
 class Review(msgspec.Struct, frozen=True, gc=False):
-    """What a review reads of some of a scan's estimates beside their posteriors, stacked: one
-    block per scan for the updates of one measurement dimension (their measured positions,
-    prior x and P, innovation y with its covariance S, and the measurement Jacobian H at the
-    prior: the gain is K = prior_P H' S^-1), and one for the scan's births (their measured
-    positions; no prior, no innovation). An estimate refers to its row of its block
-    (Estimate.review, Estimate.row): a scan's estimates share their blocks, instead of holding
-    a view of each array (six objects per estimate to make and to free)."""
+    """Some of a scan's estimates stacked, for a review: one block per scan for the updates of
+    one measurement dimension (their posteriors, measured positions, prior x and P, innovation
+    y with its covariance S, and the measurement Jacobian H at the prior: the gain is
+    K = prior_P H' S^-1), and one for the scan's births (posteriors and measured positions; no
+    prior, no innovation). An estimate refers to its row of its block (Estimate.review,
+    Estimate.row): a scan's estimates share their blocks, instead of holding a view of each
+    array (six objects per estimate to make and to free), and a consumer of many estimates
+    (the recording) reads them block by block. X, P: the estimates' x and P, the arrays they
+    are rows of where they are (Estimate.x is X[row])."""
 
+    X: Array  # (k, d)
+    P: Array  # (k, d, d)
     meas_pos: Array  # (k, p): world position of each measurement used (the association)
     prior_x: Array | None = None  # (k, d)
     prior_P: Array | None = None  # (k, d, d)
     y: Array | None = None  # (k, m)
     S: Array | None = None  # (k, m, m)
     H: Array | None = None  # (k, m, d)
+
+
+# Estimate's properties: its rows of its Review block's fields of these names
+REVIEW_ROWS = ("meas_pos", "prior_x", "prior_P", "y", "S", "H")
 
 
 def _review_row(name: str) -> property:

@@ -17,7 +17,7 @@ from fusion.config import CartesianSensorConfig, LifecycleConfig, MotionConfig, 
 from fusion.io.rerun_sink import RerunSink
 from fusion.io.view_rows import Stacked
 from fusion.tracking.detection import Detection
-from fusion.tracking.results import Review
+from fusion.tracking.results import REVIEW_ROWS
 from fusion.tracking.tracker import Tracker
 
 TARGETS = 20
@@ -46,7 +46,7 @@ def _tracker() -> Tracker:
 
 
 # an estimate's arrays: its own fields' and its rows of its Review block (Estimate's properties)
-ARRAYS = ("x", "P", "mode_probabilities") + Review.__struct_fields__
+ARRAYS = ("x", "P", "mode_probabilities") + REVIEW_ROWS
 
 
 def _stacked_arrays(e) -> list[weakref.ref]:

@@ -17,10 +17,11 @@ def _estimates(n: int, seed: int) -> list[Estimate]:
     for k in range(n):
         born = k % 4 == 0  # a birth: no prior, innovation or gain
         # each its own one-row Review block (in the tracker a scan's estimates share theirs), or none
-        review = None if k % 7 == 3 else Review(rng.normal(size=(1, 3))) if born else Review(
-            rng.normal(size=(1, 3)), rng.normal(size=(1, 5)), np.eye(5)[None], rng.normal(size=(1, 2)), np.eye(2)[None],
-            None if k % 5 == 1 else rng.normal(size=(1, 2, 5)))
-        out.append(Estimate(k, 10 * k, "radar1" if k % 2 else "cam1", k, rng.normal(size=5), np.eye(5), "confirmed", 0,
+        x, P = rng.normal(size=(1, 5)), np.eye(5)[None] * rng.random()
+        review = None if k % 7 == 3 else Review(x, P, rng.normal(size=(1, 3))) if born else Review(
+            x, P, rng.normal(size=(1, 3)), rng.normal(size=(1, 5)), np.eye(5)[None], rng.normal(size=(1, 2)),
+            np.eye(2)[None], None if k % 5 == 1 else rng.normal(size=(1, 2, 5)))
+        out.append(Estimate(k, 10 * k, "radar1" if k % 2 else "cam1", k, x[0], P[0], "confirmed", 0,
                             None if born else float(rng.random()), None if k % 3 else rng.random(2), review))
     return out
 

@@ -49,6 +49,9 @@ def test_review_rows_are_the_update_of_each_estimate_with_mixed_dimensions() -> 
         mixed_scans += len(dims) > 1
         shared += len(updated) > len(blocks)
         for e in E:
+            # its posterior is its row of its block (the same memory where the scan has one dimension)
+            assert e.x.tobytes() == e.review.X[e.row].tobytes() and e.P.tobytes() == e.review.P[e.row].tobytes()
+            assert np.shares_memory(e.x, e.review.X) == (len(dims) == 1 or e.nis is None)
             z = by_seq[e.seq].z  # range, bearing (, range rate): the measured world position
             assert np.allclose(e.meas_pos[:2], RADAR + z[0] * np.array([np.cos(z[1]), np.sin(z[1])]), atol=1e-9)
             if e.nis is None:  # a birth: no prior, no innovation

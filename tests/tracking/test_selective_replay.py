@@ -25,7 +25,7 @@ import pytest
 
 import fusion.tracking.tracker as tracker_module
 from fusion.config import TrackerConfig, load_service_config
-from fusion.tracking.results import Estimate, Review
+from fusion.tracking.results import REVIEW_ROWS, Estimate
 from fusion.tracking.tracker import Tracker
 from fusion.tracking.trackset import ROW_FIELDS
 from tests.tracking.streams import CLUTTER, Labeled, Sensor, constant_velocity, detect, in_order
@@ -43,7 +43,7 @@ def shipped(**lifecycle: int) -> TrackerConfig:
 
 
 # what an estimate says: its fields, with its rows of its Review block (Estimate's properties of the same names)
-ESTIMATE_FIELDS = tuple(f for f in Estimate.__struct_fields__ if f not in ("review", "row")) + Review.__struct_fields__
+ESTIMATE_FIELDS = tuple(f for f in Estimate.__struct_fields__ if f not in ("review", "row")) + REVIEW_ROWS
 
 
 def canon(x: object) -> object:
