@@ -330,6 +330,9 @@ class RerunSink:
         scored = self.rows.score(E, t_est, arr_e, stp_e, self, horizon_ns=horizon)
         if scored is not None:
             self._scored.append(scored)
+        if self._horizon_ns is not None:  # every estimate still to score is at or after it
+            self.rows.forget_truth_before(self._horizon_ns if not self._est[0] else
+                                          min(self._horizon_ns, min(e.t_ns for e in self._est[0])))
         self._pause()
         if self._counts is not None and (self._pending or final):
             counts = sorted(self._counts().items())

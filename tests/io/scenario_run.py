@@ -50,15 +50,16 @@ def record_scenario(name: str, path, *, duration_s: float | None = None, batch: 
                     shuffle_seed: int | None = None, flush_rows: int = 200_000, flush_interval_s: float = 0.5,
                     write_interval_s: float | None = None, write_rows: int | None = None,
                     view_interval_s: float | None = None, view_rows_max: int | None = None,
-                    view_slice: int | None = None, background: bool = False):
+                    view_slice: int | None = None, background: bool = False, late: tuple[int, float] | None = None):
     """The reference scenario `name` (configs/scenarios/<name>.toml) as the service runs it: its
     stream of samples (measurements and truth) through the Pipeline with a RerunSink writing
     `path` (flushed and written as the arguments say; view_interval_s, view_rows_max None: the sink's defaults), `batch`
     samples per ingest; with `shuffle_seed`, the measurements of each block of 40
     samples come in a seeded random order (more late arrivals; truth keeps its places); with
     `background`, the sink behind the service's recording thread (fusion.io.sink_thread, the loop's
-    counts taken before every call). Returns the pipeline (its tracker and counts) after the sink is
-    closed."""
+    counts taken before every call); with `late` = (n, s), every n-th measurement comes after the
+    samples of the next s seconds of sensor time (a replay from far back in the window). Returns
+    the pipeline (its tracker and counts) after the sink is closed."""
     import msgspec
 
     from fusion.io import wire
@@ -98,6 +99,8 @@ def record_scenario(name: str, path, *, duration_s: float | None = None, batch: 
             for i, j in zip(block, rng.permutation(block).tolist(), strict=True):
                 order[i] = j
         records = [records[j] for j in order]
+    if late is not None:
+        records = _delayed(records, every=late[0], late_ns=round(late[1] * 1e9))
     try:
         for i in range(0, len(records), batch):
             pipe.ingest(records[i:i + batch])
@@ -105,6 +108,24 @@ def record_scenario(name: str, path, *, duration_s: float | None = None, batch: 
         (writer if writer is not None else sink).close()
         pipe.warn.flush()  # its held-back warnings now, not in another test's flush_all
     return pipe
+
+
+def _delayed(records: list, *, every: int, late_ns: int) -> list:
+    """Every `every`-th measurement moved after the samples up to `late_ns` of sensor time later."""
+    from fusion import messages as m
+
+    t_of = [m.decode_truth(p).t_ns if "/truth/" in k else m.decode_measurement(p).t_ns for _, k, p in records]
+    held = [i for i, (_, k, _) in enumerate(records) if "/truth/" not in k][::every]
+    due = sorted((t_of[i] + late_ns, i) for i in held)
+    skip = set(held)
+    out = []
+    for i, r in enumerate(records):
+        if i in skip:
+            continue
+        while due and due[0][0] < t_of[i]:
+            out.append(records[due.pop(0)[1]])
+        out.append(r)
+    return out + [records[i] for _, i in due]
 
 
 def record_maneuver(path, *, seed: int = 3, batch: int = 1, sink=None) -> tuple[list[StepResult], dict]:
