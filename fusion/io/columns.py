@@ -185,7 +185,7 @@ def _strips(rr: Any, c: Column) -> Any:
     # one (n, k, 3) array when every strip has k points (rerun converts it without per-strip work):
     # what field() gives when every chunk was one; else a list of strips, their shapes looked at
     if isinstance(strips, np.ndarray):
-        arr: Any = strips.astype(np.float32)
+        arr: Any = np.asarray(strips, dtype=np.float32)  # no copy of float32 strips
     elif len({np.shape(x) for x in strips}) == 1:
         arr = np.asarray(strips, dtype=np.float32)
     else:

@@ -49,27 +49,28 @@ def eig_sym2(cov: Array) -> tuple[Array, Array, Array]:
     return h - q, h + q, 0.5 * np.arctan2(2.0 * b, a - c)
 
 
-def ellipse_points(mean: Array, cov: Array, *, n_sigma: float = 2.0, dims: int = 2) -> Array:
+def ellipse_points(mean: Array, cov: Array, *, n_sigma: float = 2.0, dims: int = 2, dtype: type = np.float64) -> Array:
     """Points of the n-sigma ellipse of 2-D Gaussians: mean + n L u for u = (cos t, sin t) on the
     unit circle, L L' = cov with L's columns the eigenvectors scaled by the square roots of their
     eigenvalues (negative ones, from rounding, as 0), smaller first (eig_sym2).
     mean (..., 2), cov (..., 2, 2) -> (..., 33, dims): dims = 3 gives world points (z = 0,
-    as `world` would make them) without another copy of the points."""
+    as `world` would make them) without another copy of the points; `dtype` float32 gives the
+    float64 points rounded (what a recording stores) without a float64 copy of them all."""
     lo, hi, phi = eig_sym2(np.asarray(cov, dtype=np.float64))
     a = n_sigma * np.sqrt(np.clip(lo, 0.0, None))[..., None]  # the smaller axis' half length
     b = n_sigma * np.sqrt(np.clip(hi, 0.0, None))[..., None]
     cos, sin = np.cos(phi)[..., None], np.sin(phi)[..., None]
-    out = np.zeros((*np.shape(mean)[:-1], len(_CIRCLE), dims))
+    out = np.zeros((*np.shape(mean)[:-1], len(_CIRCLE), dims), dtype=dtype)
     # x = m0 - (a sin) c0 + (b cos) c1 and y = m1 + (a cos) c0 + (b sin) c1, the operations in
-    # that order, written into `out` through one scratch array (n points each: a temporary per
-    # product was most of the time, on memory not touched before)
-    tmp = np.empty(out.shape[:-1])
+    # that order in float64, through two scratch arrays, then into `out` (a new temporary per
+    # product, on memory not touched before, was most of the time)
+    tmp, x = np.empty(out.shape[:-1]), np.empty(out.shape[:-1])
     for k, (w0, w1, op) in enumerate(((a * sin, b * cos, np.subtract), (a * cos, b * sin, np.add))):
-        x = out[..., k]
         np.multiply(w0, _CIRCLE[:, 0], out=tmp)
         op(mean[..., k, None], tmp, out=x)
         np.multiply(w1, _CIRCLE[:, 1], out=tmp)
         np.add(x, tmp, out=x)
+        out[..., k] = x
     return out
 
 

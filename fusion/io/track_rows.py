@@ -255,8 +255,8 @@ class Rows:
         self._cursor(sink, tid, lab, rows, c)
 
     def _update_parts(self, sink: Any, base: str, tid: int, c: Stacked) -> None:
-        """NIS with its bounds, innovation with +-2 sqrt(diag S) and Kalman gain, per sensor
-        (stacked: one batched solve per sensor), and IMM mode probabilities, of track `tid`."""
+        """NIS with its bounds, innovation with +-2 sqrt(diag S) and Kalman gain (Updates.K), per
+        sensor, and IMM mode probabilities, of track `tid`."""
         d = len(self.layout)
         for sensor, u in sorted(c.updates.items()):
             g = np.flatnonzero(c.ids[u.rows] == tid)  # the track's rows of this sensor, in order
@@ -278,8 +278,7 @@ class Rows:
                 t, step, arr, v=np.concatenate([Y, s2, -s2], axis=1))
             has_k = u.gain[g]
             if has_k.any():
-                H, Pm, Sg = u.H[g][has_k], u.Pm[g][has_k], S[has_k]
-                K = np.swapaxes(np.linalg.solve(Sg, H @ Pm), 1, 2)  # P- H' S^-1, S symmetric
+                K = u.K[g][has_k]
                 # one scale per unit; a sink without the description (bench/recording_cost.py loads
                 # main's sink beside this module) gets the unsplit gain
                 measured = getattr(sink, "measured", {})
@@ -324,7 +323,7 @@ class Rows:
                     t[k], step[k], arr[k], c=pos[k], h=half[k], q=quat[k])
             return
         if len(self.pi) == 2:
-            strips = derive.ellipse_points(pos, Pp, dims=3)  # world points
+            strips = derive.ellipse_points(pos, Pp, dims=3, dtype=np.float32)  # world points, as recorded
             if keep:
                 sink.col(f"{w}/trail", "strips", rgba=colour("trail"), radius=-0.5).extend(
                     t[k], step[k], arr[k], s=strips[k])

@@ -29,7 +29,7 @@ from fusion.io.columns import stack
 from fusion.tracking.results import Estimate, Review
 
 # Updates' per-row blocks after `rows`, and Stacked's per-row arrays: positional, then keyword
-_UPDATE_BLOCKS = ("Y", "S", "nis", "gain", "H", "Pm")
+_UPDATE_BLOCKS = ("Y", "S", "nis", "gain", "K")
 _POSITIONAL = ("t", "step", "arr", "X", "P", "std", "err", "matched", "nees", "TX", "W")
 _KEYWORD = ("ids", "conf", "prior", "meas", "meas_pos", "mode")
 
@@ -37,12 +37,14 @@ _KEYWORD = ("ids", "conf", "prior", "meas", "meas_pos", "mode")
 class Updates:
     """One sensor's rows with an innovation: `rows` (indices into the Stacked), innovation `Y`
     (k, m), its covariance `S` (k, m, m), `nis` (k,), and where the gain is known (`gain` (k,)),
-    the Jacobian `H` (k, m, d) and prior covariance `Pm` (k, d, d) (NaN elsewhere)."""
+    the Kalman gain `K` (k, d, m) = P- H' S^-1 (NaN elsewhere): computed when the rows are
+    stacked (`Stacked.of`, a record flush's few rows), so what waits for the view flush is K, not
+    the Jacobian and the prior covariance it comes from."""
 
-    __slots__ = ("H", "Pm", "S", "Y", "gain", "nis", "rows")
+    __slots__ = ("K", "S", "Y", "gain", "nis", "rows")
 
-    def __init__(self, rows: Array, Y: Array, S: Array, nis: Array, gain: Array, H: Array, Pm: Array) -> None:
-        self.rows, self.Y, self.S, self.nis, self.gain, self.H, self.Pm = rows, Y, S, nis, gain, H, Pm
+    def __init__(self, rows: Array, Y: Array, S: Array, nis: Array, gain: Array, K: Array) -> None:
+        self.rows, self.Y, self.S, self.nis, self.gain, self.K = rows, Y, S, nis, gain, K
 
     @classmethod
     def concat(cls, parts: list[tuple[int, Updates]]) -> Updates:
@@ -175,13 +177,13 @@ class Stacked:
                 continue
             Y = rv.take("y", ks)
             m = Y.shape[1]
+            S = rv.take("S", ks)
             gain = gains[ks]
-            H = np.full((ks.size, m, d), np.nan)
-            Pm = np.full((ks.size, d, d), np.nan)
+            K = np.full((ks.size, d, m), np.nan)
             if gain.any():
-                H[gain], Pm[gain] = rv.take("H", ks[gain]), rv.take("prior_P", ks[gain])
-            updates[sensor] = Updates(ks, Y, rv.take("S", ks), np.array([niss[k] for k in ks.tolist()],
-                                                                         dtype=np.float64), gain, H, Pm)
+                H, Pm = rv.take("H", ks[gain]), rv.take("prior_P", ks[gain])
+                K[gain] = np.swapaxes(np.linalg.solve(S[gain], H @ Pm), 1, 2)  # P- H' S^-1, S symmetric
+            updates[sensor] = Updates(ks, Y, S, np.array([niss[k] for k in ks.tolist()], dtype=np.float64), gain, K)
         ids = np.array([e.track_id for e in E], dtype=np.int64)
         return cls(t, step, arr, X, P, std, err, matched, nees, TX, W, ids=ids, conf=conf, prior=prior, meas=meas,
                    meas_pos=meas_pos, mode=mode, mu=mu, updates=updates)

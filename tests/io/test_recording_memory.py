@@ -66,7 +66,7 @@ def test_viewed_rows_are_arrays_of_their_own_with_the_same_values() -> None:
     n = len(X)
     s = Stacked.of(updated, np.zeros(n, np.int64), np.zeros(n, np.int64), np.zeros(n, np.int64), X, P, X, X,
                    np.zeros(n, bool), np.zeros(n), X, X, conf=np.ones(n, bool), n_pos=2)
-    kept = [s.prior, s.meas_pos] + [a for u in s.updates.values() for a in (u.Y, u.S, u.H, u.Pm)]
+    kept = [s.prior, s.meas_pos] + [a for u in s.updates.values() for a in (u.Y, u.S, u.K)]
     for e in updated:
         for f in ARRAYS:
             a = getattr(e, f)
@@ -77,8 +77,9 @@ def test_viewed_rows_are_arrays_of_their_own_with_the_same_values() -> None:
     assert np.array_equal(s.meas_pos, np.stack([e.meas_pos[:2] for e in updated]))
     assert np.array_equal(u.Y, np.stack([e.y for e in updated]))
     assert np.array_equal(u.S, np.stack([e.S for e in updated]))
-    assert np.array_equal(u.H, np.stack([e.H for e in updated]))
-    assert np.array_equal(u.Pm, np.stack([e.prior_P for e in updated]))
+    K = np.swapaxes(np.linalg.solve(np.stack([e.S for e in updated]),
+                                    np.stack([e.H for e in updated]) @ np.stack([e.prior_P for e in updated])), 1, 2)
+    assert np.array_equal(u.K, K)  # P- H' S^-1
 
 
 def test_viewed_rows_do_not_keep_the_steps_arrays(tmp_path: Path) -> None:

@@ -51,9 +51,14 @@ def _same(s: Stacked, es: list[Estimate]) -> None:
             e = es[i]
             assert np.array_equal(u.Y[j], e.y) and np.array_equal(u.S[j], e.S) and u.nis[j] == e.nis
             assert u.gain[j] == (e.H is not None)
-            if e.H is not None:
-                assert np.array_equal(u.H[j], e.H) and np.array_equal(u.Pm[j], e.prior_P)
+            if e.H is not None:  # the gain P- H' S^-1, as one row of the batched solve
+                assert np.array_equal(u.K[j], _gain(e))
     assert sorted(s.updates) == sorted({e.sensor_id for e in es if e.y is not None})
+
+
+def _gain(e: Estimate) -> np.ndarray:
+    """K = P- H' S^-1 of one estimate, computed as the batched one is (a stack of one)."""
+    return np.swapaxes(np.linalg.solve(e.S[None], e.H[None] @ e.prior_P[None]), 1, 2)[0]
 
 
 def test_stacked_of_and_concat() -> None:
