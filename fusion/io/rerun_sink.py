@@ -324,15 +324,15 @@ class RerunSink:
             W = world(S[:, self.rows.pi])
             self.col("world/truth", "points", rgba=colour("truth"), radius=-1.5).extend(
                 t_t, step_t, t_t, p=W[:, None, :])
+        waiting = min(e.t_ns for e in self._est[0]) if self._est[0] else None  # the oldest row waiting
         horizon = FINAL if ends else self._horizon_ns
-        if horizon is not None and self._est[0]:  # rows waiting for the next flush are not final either
-            horizon = min(horizon, min(e.t_ns for e in self._est[0]))
+        if horizon is not None and waiting is not None:  # rows waiting for the next flush are not final either
+            horizon = min(horizon, waiting)
         scored = self.rows.score(E, t_est, arr_e, stp_e, self, horizon_ns=horizon)
         if scored is not None:
             self._scored.append(scored)
         if self._horizon_ns is not None:  # every estimate still to score is at or after it
-            self.rows.forget_truth_before(self._horizon_ns if not self._est[0] else
-                                          min(self._horizon_ns, min(e.t_ns for e in self._est[0])))
+            self.rows.forget_truth_before(self._horizon_ns if waiting is None else min(self._horizon_ns, waiting))
         self._pause()
         if self._counts is not None and (self._pending or final):
             counts = sorted(self._counts().items())

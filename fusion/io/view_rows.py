@@ -90,12 +90,15 @@ class ReviewBlocks:
         """The same for the estimates `rows` (indices)."""
         return ReviewBlocks(self.blocks, self.which[rows], self.row[rows])
 
+    def _arrays(self, name: str) -> list[Array | None]:
+        """Each block's field `name` (None where there is no block, or it has not that field)."""
+        return [None if b is None else getattr(b, name) for b in self.blocks]
+
     def width(self, name: str) -> Array:
         """(n,) int64: the length of each estimate's row of the field (its block's second axis; 0
         where it has none): the innovation's dimension, of "y"."""
-        w = np.array([0 if b is None or getattr(b, name) is None else getattr(b, name).shape[1] for b in self.blocks],
-                     dtype=np.int64)
-        return w[self.which] if len(self.which) else np.zeros(0, dtype=np.int64)
+        w = np.array([0 if a is None else a.shape[1] for a in self._arrays(name)], dtype=np.int64)
+        return w[self.which]
 
     def rows_of(self, name: str, estimates: Sequence[Estimate], attr: str) -> Array:
         """The field's row of every estimate, stacked: from the blocks when every estimate has
@@ -107,8 +110,8 @@ class ReviewBlocks:
 
     def has(self, name: str) -> Array:
         """(n,) bool: whether each estimate's block has the field."""
-        h = np.array([b is not None and getattr(b, name) is not None for b in self.blocks], dtype=bool)
-        return h[self.which] if len(self.which) else np.zeros(0, dtype=bool)
+        h = np.array([a is not None for a in self._arrays(name)], dtype=bool)
+        return h[self.which]
 
     def take(self, name: str, at: Array, *, cut: int | None = None) -> Array:
         """The field's rows of the estimates `at` (each with the field), stacked (a new array):
@@ -116,8 +119,7 @@ class ReviewBlocks:
         parts: list[Array] = []
         off = np.zeros(len(self.blocks), dtype=np.int64)
         o = 0
-        for k, b in enumerate(self.blocks):
-            a = None if b is None else getattr(b, name)
+        for k, a in enumerate(self._arrays(name)):
             if a is not None:
                 parts.append(a if cut is None else a[:, :cut])
                 off[k] = o
