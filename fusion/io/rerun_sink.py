@@ -233,7 +233,7 @@ class RerunSink:
         if ms or A:
             self._steps.append((ms, A, step, arrival_ns))
             # the rows they will make, as counted towards flush_rows: one per scan, one per association
-            self._pending += len(ms) + len(A)
+            self._pending += len(ms) + result.n_associations
         if E:
             self._est_steps.append((E, step, arrival_ns))
             self._pending += len(E)

@@ -96,7 +96,7 @@ class SinkThread:
         return None if self._guard is None else self._guard.error
 
     def log_step(self, result: StepResult, *, arrival_ns: int | None = None) -> None:
-        rows = len(result.estimates) + len(result.associations) + len(result.events) + len(result.refused) + 1
+        rows = len(result.estimates) + result.n_associations + len(result.events) + len(result.refused) + 1
         self._put(rows, self._guard.log_step, (result,), {"arrival_ns": arrival_ns})  # type: ignore[union-attr]
 
     def log_truth(self, target_id: str, t_ns: int, state: np.ndarray) -> None:

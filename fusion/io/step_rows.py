@@ -7,7 +7,8 @@ keeps each step's measurements and associations as they are and calls these at t
   scan-time order, each point coloured by its association's outcome in that step (associated:
   it updated a track; else clutter).
 
-`steps`: (measurements, associations, step, arrival_ns or None (then each row's t_ns)).
+`steps`: (measurements, associations (a ScanAssociations block per scan), step, arrival_ns or None
+(then each row's t_ns)).
 """
 
 from __future__ import annotations
@@ -24,34 +25,40 @@ from fusion.io.columns import Ragged
 from fusion.io.derive import world
 from fusion.io.labels import short_id
 from fusion.io.palette import colour
-from fusion.tracking.results import Outcome, ScanPoints
+from fusion.tracking.results import NO_TRACK, OUTCOME_CODE, OUTCOMES, Outcome, ScanPoints
 
 Step = tuple[tuple, tuple, int, int | None]
-_USED = (Outcome.UPDATED,)  # a measurement that started a track is not drawn as associated
+_USED = OUTCOME_CODE[Outcome.UPDATED]  # a measurement that started a track is not drawn as associated
+_OUTCOME_VALUES = np.array([o.value for o in OUTCOMES], dtype=object)
 _RGBA_USED = np.array(colour("associated"), dtype=np.uint8)
 _RGBA_CLUTTER = np.array(colour("clutter"), dtype=np.uint8)
 
 
 def associations(steps: Sequence[Step], sink: Any) -> None:
-    """Every association of `steps` as one block of record/associations rows."""
-    A = [a for _, As, _, _ in steps for a in As]
-    if not A:
+    """Every association of `steps` (their scans' ScanAssociations blocks) as one block of
+    record/associations rows, in step then scan order."""
+    blocks = [(b, step, arr) for _, Bs, step, arr in steps for b in Bs]
+    lens = np.array([b.seq.size for b, _, _ in blocks], dtype=np.int64)
+    if not lens.sum():
         return
-    step_a: list[int] = []
-    arr_a: list[int] = []
-    for _, As, step, arr in steps:
-        step_a += [step] * len(As)
-        arr_a += [a.t_ns for a in As] if arr is None else [arr] * len(As)
-    gated = [a.gated for a in A]
-    flat = [short_id(g) for gs in gated for g in gs]
-    offsets = np.zeros(len(A) + 1, dtype=np.int32)
-    np.cumsum([len(gs) for gs in gated], out=offsets[1:])
+    t = np.repeat(np.array([b.t_ns for b, _, _ in blocks], dtype=np.int64), lens)
+    step_a = np.repeat(np.array([s for _, s, _ in blocks], dtype=np.int64), lens)
+    arr_a = np.repeat(np.array([b.t_ns if a is None else a for b, _, a in blocks], dtype=np.int64), lens)
+    sensor = np.repeat(np.array([b.sensor_id for b, _, _ in blocks], dtype=object), lens)
+    track = np.concatenate([b.track_id for b, _, _ in blocks])
+    # the rows' gated counts: the differences of the blocks' gated_at, less those across a block's end
+    at = np.concatenate([b.gated_at for b, _, _ in blocks])
+    counts = np.delete(np.diff(at), np.cumsum(lens + 1)[:-1] - 1)
+    offsets = np.zeros(len(t) + 1, dtype=np.int32)
+    np.cumsum(counts, out=offsets[1:])
+    ids, at_id = np.unique(np.concatenate([track] + [b.gated for b, _, _ in blocks]), return_inverse=True)
+    names = np.array(["" if i == NO_TRACK else short_id(i) for i in ids.tolist()], dtype=object)[at_id]
     sink.col("record/associations", "record").extend(
-        [a.t_ns for a in A], step_a, arr_a, sensor=[a.sensor_id for a in A], seq=[a.seq for a in A],
-        outcome=[a.outcome for a in A],  # an Outcome is a str (StrEnum): arrow takes its value as it is
-        label=["" if a.track_id is None else short_id(a.track_id) for a in A],
-        gated=pa.ListArray.from_arrays(pa.array(offsets), pa.array(flat, pa.string())),
-        nis=np.array([a.nis for a in A], dtype=np.float64))  # None (a birth's, clutter's) as NaN
+        t, step_a, arr_a, sensor=sensor.tolist(), seq=np.concatenate([b.seq for b, _, _ in blocks]),
+        outcome=_OUTCOME_VALUES[np.concatenate([b.outcome for b, _, _ in blocks])].tolist(),
+        label=names[:len(t)].tolist(),
+        gated=pa.ListArray.from_arrays(pa.array(offsets), pa.array(names[len(t):], pa.string())),
+        nis=np.concatenate([b.nis for b, _, _ in blocks]))  # NaN: it updated no track
 
 
 def measured_points(steps: Sequence[Step], sink: Any) -> None:
@@ -65,7 +72,9 @@ def measured_points(steps: Sequence[Step], sink: Any) -> None:
             sensor = sp.sensor_id
             used = used_seqs.get(sensor)
             if used is None:
-                used = used_seqs[sensor] = {a.seq for a in As if a.outcome in _USED and a.sensor_id == sensor}
+                used = used_seqs[sensor] = {q for b in As if b.sensor_id == sensor
+                                            for q, o in zip(b.seq.tolist(), b.outcome.tolist(), strict=True)
+                                            if o == _USED}
             seqs = sp.seq.tolist()
             flags = [q in used for q in seqs] if used else [False] * len(seqs)
             by_sensor.setdefault(sensor, []).append((step, sp.t_ns, sp.t_ns if arr is None else arr, sp, flags))

@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 
 from fusion.tracking.detection import Detection
 from fusion.tracking.replay import Gates
-from fusion.tracking.results import Association, Estimate, ScanKey, TrackEvent
+from fusion.tracking.results import Estimate, ScanAssociations, ScanKey, TrackEvent
 from fusion.tracking.trackset import TrackSet
 
 Revision = tuple[int, int, bool]  # (revision, signature, alive)
@@ -38,7 +38,7 @@ class Entry:
     emitted: dict[int, Revision] = field(default_factory=dict)  # track id -> latest reported
     events: dict[tuple[str, int, int, str], TrackEvent] = field(default_factory=dict)
     tally: Counter = field(default_factory=Counter)
-    associations: list[Association] = field(default_factory=list)  # what its run did with each detection
+    associations: ScanAssociations | None = None  # what its run did with each detection
     gates: Gates | None = None  # its coarse pairs, when a partial re-run computed them
 
 

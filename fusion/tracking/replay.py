@@ -31,9 +31,10 @@ import numpy as np
 
 from fusion.core.association import coarse_pairs
 from fusion.core.checks import Array
+from fusion.tracking.association_kernels import counted
 from fusion.tracking.detection import Detection
 from fusion.tracking.id_sets import member, rerun_sets
-from fusion.tracking.results import Association, EventKind, Outcome, ScanKey
+from fusion.tracking.results import OUTCOME_CODE, EventKind, Outcome, ScanAssociations, ScanKey
 from fusion.tracking.scan import Coarse, ScanContext, ScanOutcome, Tally, measured_points, run_scan
 from fusion.tracking.splice import after_in_place, assembled_after, spliced
 from fusion.tracking.trackset import TrackSet
@@ -59,7 +60,7 @@ class Stored:
     before: TrackSet
     after: TrackSet
     dets: tuple[Detection, ...]
-    associations: list[Association]
+    associations: ScanAssociations
     tally: Counter
     gates: Gates | None = None
 
@@ -143,26 +144,20 @@ def _added_pairs(ts: TrackSet, changed: np.ndarray, new: np.ndarray, points: tup
     return np.concatenate(ids), np.concatenate(sq)
 
 
-def _tally_of(assoc: list[Association], events: list, *, skips: int = 0) -> Counter:
+def _tally_of(assoc: ScanAssociations, rows: np.ndarray, events: list) -> Counter:
     """The tally of a part of a scan from what it did (fusion.tracking.scan counts the same):
-    updates, births and unassigned (in a gate, not taken) from the associations; confirmations
-    and deletions from the events. Used for parts without capacity refusals."""
+    updates, births and unassigned (in a gate, not taken) from the associations `rows`;
+    confirmations and deletions from the events. Used for parts without capacity refusals."""
     t: Counter = Counter()
-    for a in assoc:
-        if a.outcome == Outcome.UPDATED:
-            t[Tally.UPDATES] += 1
-        else:
-            if a.gated:
-                t[Tally.UNASSIGNED] += 1
-            if a.outcome == Outcome.BORN:
-                t[Tally.BIRTHS] += 1
+    counts = counted(assoc.outcome, assoc.gated_at, rows, OUTCOME_CODE[Outcome.UPDATED], OUTCOME_CODE[Outcome.BORN])
+    for kind, n in zip((Tally.UPDATES, Tally.UNASSIGNED, Tally.BIRTHS), counts, strict=True):
+        if n:
+            t[kind] += n
     for ev in events:
         if ev.kind == EventKind.CONFIRMED:
             t[Tally.CONFIRMATIONS] += 1
         elif ev.kind == EventKind.DELETED and ev.reason is not None:
             t[ev.reason] += 1
-    if skips:
-        t[Tally.NUMERICAL_SKIPS] += skips
     return t
 
 
@@ -207,7 +202,7 @@ def rerun(ts: TrackSet, key: ScanKey, dets: tuple[Detection, ...], ctx: ScanCont
         return None
     in_js = np.zeros(len(dets), dtype=bool)
     in_js[js] = True
-    gone_k = np.flatnonzero(in_js[old_j]).tolist()  # the stored detections run again
+    gone_k = np.flatnonzero(in_js[old_j])  # the stored detections run again
     A = old.after
     born_then = ~member(A.ids, old.before.ids)  # the stored run's births
     kept_births = A.ids[born_then & ~member(A.origin_seq, seqs[js])]
@@ -222,8 +217,7 @@ def rerun(ts: TrackSet, key: ScanKey, dets: tuple[Detection, ...], ctx: ScanCont
     touched = np.unique(np.concatenate([ts.ids[rows]] + ([] if sub is None else [sub.after.ids])))
     kept = set(ts.ids.tolist()).union(kept_births.tolist()).difference(touched.tolist())
     # the stored tally less what the re-run part counted in the stored run, plus what it counts now
-    tally = old.tally - _tally_of([old.associations[k] for k in gone_k],
-                                  [ev for ev in old_events if ev.track_id not in kept])
+    tally = old.tally - _tally_of(old.associations, gone_k, [ev for ev in old_events if ev.track_id not in kept])
     assoc, estimates, events = old.associations, [], []
     if sub is not None:
         tally.update(sub.tally)

@@ -8,12 +8,13 @@ revisions and retractions are applied the way a consumer applies them:
 Only Replay records and the arrival counts (replays, replayed scans, rescans, late_applied)
 describe how the data arrived, and they are named so.
 
-The per-measurement records (Estimate, TrackEvent, Association), a scan's new measured points
-(ScanPoints, one per scan: arrays, not a record per measurement) and what a review reads of a
-scan's estimates beside their posteriors (Review, a block per scan that its estimates refer to
-by row) are frozen msgspec Structs without cyclic-GC tracking (they hold arrays, tuples,
-scalars and, an Estimate, its Review: never a cycle): built thousands of times per batch, they
-cost ~0.4 us each where a frozen dataclass cost ~3-5 us.
+The per-track records (Estimate, TrackEvent), a scan's associations and new measured points
+(ScanAssociations and ScanPoints, one per scan: arrays, not a record per measurement;
+Association is one row as a record) and what a review reads of a scan's estimates beside their
+posteriors (Review, a block per scan that its estimates refer to by row) are frozen msgspec
+Structs without cyclic-GC tracking (they hold arrays, tuples, scalars and, an Estimate, its
+Review: never a cycle): built thousands of times per batch, they cost ~0.4 us each where a
+frozen dataclass cost ~3-5 us.
 """
 
 from __future__ import annotations
@@ -169,7 +170,8 @@ class ScanPoints(msgspec.Struct, frozen=True, gc=False):
 
 
 class Association(msgspec.Struct, frozen=True, gc=False):
-    """What became of one accepted measurement in its scan, and the tracks in whose gate it fell."""
+    """What became of one accepted measurement in its scan, and the tracks in whose gate it fell:
+    one row of its scan's ScanAssociations, as a record."""
 
     sensor_id: str
     t_ns: int
@@ -178,6 +180,45 @@ class Association(msgspec.Struct, frozen=True, gc=False):
     track_id: int | None
     nis: float | None
     gated: tuple[int, ...]
+
+
+OUTCOMES: tuple[Outcome, ...] = tuple(Outcome)  # ScanAssociations.outcome holds indices into this
+OUTCOME_CODE: dict[Outcome, int] = {o: k for k, o in enumerate(OUTCOMES)}
+NO_TRACK = -1  # ScanAssociations.track_id of a measurement that updated or started no track
+
+
+class ScanAssociations(msgspec.Struct, frozen=True, gc=False):
+    """What became of each accepted measurement of one scan (sensor_id, t_ns), as columns in the
+    scan's detection order (by seq), one row per measurement: seq (M,) int64; outcome (M,) int8,
+    an index into OUTCOMES; track_id (M,) int64, the track it updated or started (NO_TRACK: none);
+    nis (M,) float64, its NIS in the gate of the track it updated (NaN: it updated none); the ids
+    of the tracks in whose gate it fell, gated[gated_at[j]:gated_at[j + 1]] (int64; gated_at
+    (M + 1,) int64). Association is one row as a record (`rows`). One block per scan instead of
+    a record per measurement: the scan builds a few arrays, the window keeps them, the
+    recording concatenates them."""
+
+    sensor_id: str
+    t_ns: int
+    seq: Array
+    outcome: Array
+    track_id: Array
+    nis: Array
+    gated_at: Array
+    gated: Array
+
+    def __len__(self) -> int:
+        return int(self.seq.shape[0])
+
+    def rows(self) -> list[Association]:
+        """Every row as an Association record, in order."""
+        at, gated = self.gated_at.tolist(), self.gated.tolist()
+        return [Association(self.sensor_id, self.t_ns, q, OUTCOMES[o], None if t == NO_TRACK else t,
+                            None if o != _UPDATED else v, tuple(gated[at[j]:at[j + 1]]))
+                for j, (q, o, t, v) in enumerate(zip(self.seq.tolist(), self.outcome.tolist(), self.track_id.tolist(),
+                                                     self.nis.tolist(), strict=True))]
+
+
+_UPDATED = OUTCOME_CODE[Outcome.UPDATED]
 
 
 @dataclass(frozen=True, slots=True)
@@ -244,8 +285,16 @@ class StepResult:
     refused: tuple[Refusal, ...]
     applied: int
     replays: tuple[Replay, ...]
-    associations: tuple[Association, ...]
+    associations: tuple[ScanAssociations, ...]  # one block per scan run (again)
     measurements: tuple[ScanPoints, ...] = ()  # one per scan that took new measurements
     # sensor time before which nothing can change any more after this call (Tracker.horizon_ns;
     # None before the window has one): what a consumer derived from earlier rows is final
     horizon_ns: int | None = None
+
+    def each_association(self) -> list[Association]:
+        """Every association of the step as a record, scan by scan in the order they ran."""
+        return [a for block in self.associations for a in block.rows()]
+
+    @property
+    def n_associations(self) -> int:
+        return sum(len(block) for block in self.associations)

@@ -24,17 +24,20 @@ import numpy as np
 from fusion.core.association import coarse_pairs, gnn_assign
 from fusion.core.checks import Array
 from fusion.core.imm import IMM, Filter, combine
+from fusion.tracking.association_kernels import built
 from fusion.tracking.detection import Detection
 from fusion.tracking.gating import Gated, Gater, Measured
 from fusion.tracking.lifecycle import Lifecycle
 from fusion.tracking.models import SensorModel
 from fusion.tracking.results import (
-    Association,
+    NO_TRACK,
+    OUTCOME_CODE,
     DeletionReason,
     Estimate,
     EventKind,
     Outcome,
     Review,
+    ScanAssociations,
     ScanKey,
     TrackEvent,
 )
@@ -74,7 +77,7 @@ class ScanOutcome:
     after: TrackSet
     estimates: list[Estimate]  # sorted by track id
     events: list[TrackEvent]
-    associations: list[Association]
+    associations: ScanAssociations
     tally: Counter[Tally | DeletionReason]
     positions: Array  # (M, d) world points of the scan's measurements, in the order of its detections
     variances: Array | None = None  # (M, d) their per-axis variances (the coarse gate's)
@@ -128,7 +131,6 @@ def run_scan(ts: TrackSet, key: ScanKey, dets: tuple[Detection, ...], ctx: ScanC
     tally[Tally.CONFIRMATIONS] += len(events)
     est_ids = updated_ids.tolist()
     nis = gated.nis[pairs].tolist()
-    mj_list = mj.tolist()
     MU = [None] * ti.size if taken.MU is None else list(taken.MU)
     reviews, rows = taken.reviews(mpos[mj])
     estimates = [
@@ -138,8 +140,7 @@ def run_scan(ts: TrackSet, key: ScanKey, dets: tuple[Detection, ...], ctx: ScanC
             strict=True)
     ]
 
-    assoc, born, born_j = _births_and_associations(ts, key, dets, gated, dict(zip(mj_list, pairs, strict=True)),
-                                                   ctx, sm, mpos, tally)
+    assoc, born, born_j = _births_and_associations(ts, key, dets, det_seqs, gated, pairs, ctx, sm, mpos, tally)
     born_review = Review(born.X, born.P, mpos[born_j]) if born.ids.size else None
     for b in range(born.ids.size):
         tid = int(born.ids[b])
@@ -169,43 +170,26 @@ def run_scan(ts: TrackSet, key: ScanKey, dets: tuple[Detection, ...], ctx: ScanC
     return ScanOutcome(after, estimates, events, assoc, tally, mpos, mvar, (ci, cj))
 
 
-def _births_and_associations(ts: TrackSet, key: ScanKey, dets: tuple[Detection, ...], gated: Gated,
-                             taken: dict[int, int], ctx: ScanContext, sm: SensorModel, mpos: Array,
-                             tally: Counter) -> tuple[list[Association], Rows, list[int]]:
-    """What became of each measurement; one that no track took starts a track (up to
+def _births_and_associations(ts: TrackSet, key: ScanKey, dets: tuple[Detection, ...], det_seqs: np.ndarray,
+                             gated: Gated, pairs: list[int], ctx: ScanContext, sm: SensorModel, mpos: Array,
+                             tally: Counter) -> tuple[ScanAssociations, Rows, np.ndarray]:
+    """What became of each measurement, the gated pairs `pairs` having updated their tracks
+    (fusion.tracking.association_kernels.built): one that no track took starts a track (up to
     max_tracks), born with single-point initiation, whether or not it fell in a gate (as Stone
-    Soup's initiator takes every unassociated detection: the tentative track it starts dies
-    unless the data keep it, and a confirmed track is never outbid by it)."""
+    Soup's initiator takes every unassociated detection: the tentative track it starts dies unless
+    the data keep it, and a confirmed track is never outbid by it). Returns the scan's
+    associations, the births' rows and the births' measurement indices."""
     t_ns, sensor_id = key
-    M = len(dets)
-    # pairs are sorted by measurement: measurement j's gated tracks are pairs lo[j]:hi[j]
-    bounds = np.searchsorted(gated.mj, np.arange(M + 1)).tolist()
-    gids = ts.ids[gated.ti].tolist()
-    nis = gated.nis.tolist()
-    assoc: list[Association] = []
-    births: list[int] = []
-    room = ctx.max_tracks - len(ts)
-    unassigned = refused = 0
-    updated = Outcome.UPDATED
-    for j, (d, lo, hi) in enumerate(zip(dets, bounds[:-1], bounds[1:], strict=True)):
-        p = taken.get(j)
-        if p is not None:
-            assoc.append(Association(sensor_id, t_ns, d.seq, updated, gids[p], nis[p], tuple(gids[lo:hi])))
-            continue
-        near = tuple(gids[lo:hi])
-        if near:  # in a gate, but no track took it
-            unassigned += 1
-        if len(births) >= room:
-            assoc.append(Association(sensor_id, t_ns, d.seq, Outcome.UNASSIGNED if near else Outcome.CAPACITY,
-                                     None, None, near))
-            refused += 1
-        else:
-            births.append(j)
-            assoc.append(Association(sensor_id, t_ns, d.seq, Outcome.BORN,
-                                     track_id_for(sensor_id, d.seq, t_ns), None, near))
+    gids = ts.ids[gated.ti]
+    taken = np.asarray(pairs, dtype=np.intp)
+    outcome, track_id, nis, at, births, unassigned, refused = built(
+        len(dets), gated.mj.astype(np.int64, copy=False), gids, gated.nis, taken, max(ctx.max_tracks - len(ts), 0),
+        NO_TRACK, *(OUTCOME_CODE[o] for o in (Outcome.UPDATED, Outcome.BORN, Outcome.UNASSIGNED, Outcome.CAPACITY)))
+    born = _born_rows(ts, [dets[j] for j in births.tolist()], mpos[births], sm, ctx)
+    track_id[births] = born.ids
     tally[Tally.UNASSIGNED] += unassigned
     tally[Tally.BIRTHS_REFUSED_CAPACITY] += refused
-    return assoc, _born_rows(ts, [dets[j] for j in births], mpos[births], sm, ctx), births
+    return ScanAssociations(sensor_id, t_ns, det_seqs, outcome, track_id, nis, at, gids), born, births
 
 
 def _assign_confirmed_first(g: Gated, ts: TrackSet, n_meas: int) -> list[int]:

@@ -6,24 +6,23 @@ from __future__ import annotations
 
 import numpy as np
 
+from fusion.tracking import association_kernels as kernels
 from fusion.tracking.id_sets import member
-from fusion.tracking.results import Association
+from fusion.tracking.results import ScanAssociations
 from fusion.tracking.trackset import TrackSet
 
 
-def spliced(stored: list[Association], old_j: np.ndarray, n: int, part: list[Association], js: np.ndarray
-             ) -> list[Association]:
+def spliced(stored: ScanAssociations, old_j: np.ndarray, n: int, part: ScanAssociations, js: np.ndarray
+            ) -> ScanAssociations:
     """The associations of the n detections in their order: the stored ones (of the detections
     at positions old_j) with those of the re-run part (positions js) in their place."""
-    if len(stored) == n:
-        out = list(stored)
-    else:
-        out = [None] * n  # type: ignore[list-item]
-        for k, j in enumerate(old_j.tolist()):
-            out[j] = stored[k]
-    for a, j in zip(part, js.tolist(), strict=True):
-        out[j] = a
-    return out
+    c = np.ascontiguousarray
+    cols = kernels.spliced(n, c(old_j, dtype=np.int64), c(js, dtype=np.int64),
+                           *(getattr(b, f) for b in (stored, part) for f in _COLUMNS))
+    return ScanAssociations(stored.sensor_id, stored.t_ns, *cols)
+
+
+_COLUMNS = ("seq", "outcome", "track_id", "nis", "gated_at", "gated")
 
 
 def after_in_place(ts: TrackSet, rows: np.ndarray, sub_after: TrackSet, A: TrackSet) -> TrackSet | None:

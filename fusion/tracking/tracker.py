@@ -198,7 +198,7 @@ class Tracker:
             entry = Entry(key, dets, ts, tally=out.tally, associations=out.associations, gates=gates)
             estimates.extend(revise(entry, prev, out.estimates, kept))
             events.extend(revise_events(entry, prev, out.events, kept))
-            assoc.extend(out.associations)
+            assoc.append(out.associations)
             self.history.append(entry)
             ts = out.after
         self._ts = ts

@@ -14,13 +14,14 @@ from fusion.io import step_rows
 from fusion.io.columns import Column, Ragged, stack
 from fusion.io.derive import world
 from fusion.io.labels import short_id
-from fusion.tracking.results import Association, Outcome, ScanPoints
+from fusion.tracking.results import NO_TRACK, OUTCOME_CODE, Association, Outcome, ScanAssociations, ScanPoints
 
 _USED = (Outcome.UPDATED,)
 _SEQ_MASK = (1 << 64) - 1
 
 
 def _ref_associations(steps: Sequence[Any], sink: Any) -> None:
+    steps = _records(steps)
     A = [a for _, As, _, _ in steps for a in As]
     if not A:
         return
@@ -51,7 +52,7 @@ def _points(ms: Sequence[ScanPoints]) -> list[_Point]:
 
 
 def _ref_measured_points(steps: Sequence[Any], sink: Any) -> None:
-    steps = [(_points(ms), As, step, arr) for ms, As, step, arr in steps]
+    steps = [(_points(ms), As, step, arr) for ms, As, step, arr in _records(steps)]
     used_keys: dict[str, set[int]] = {}
     for _, As, step, _ in steps:
         for a in As:
@@ -111,8 +112,31 @@ def _steps(seed: int) -> list[Any]:
                 gated = tuple(int(g) for g in rng.integers(1, 2**62, size=int(rng.integers(0, 3))))
                 As.append(Association(s, tk, seq, oc, tid, None if rng.random() < 0.3 else float(rng.random()),
                                       gated))
-        out.append((_scans(ms), tuple(As), step, None if step % 4 == 0 else t + 5))
+        out.append((_scans(ms), _blocks(As), step, None if step % 4 == 0 else t + 5))
     return out
+
+
+def _blocks(As: list[Association]) -> tuple[ScanAssociations, ...]:
+    """The associations of a step as the tracker reports them: one block per (sensor, time), in
+    the order each first appears; as a scan does, a NIS only where the measurement updated a track."""
+    groups: dict[tuple[str, int], list[Association]] = {}
+    for a in As:
+        groups.setdefault((a.sensor_id, a.t_ns), []).append(a)
+    out = []
+    for (s, t), g in groups.items():
+        at = np.cumsum([0] + [len(a.gated) for a in g]).astype(np.int64)
+        out.append(ScanAssociations(
+            s, t, np.array([a.seq for a in g], dtype=np.int64),
+            np.array([OUTCOME_CODE[a.outcome] for a in g], dtype=np.int8),
+            np.array([NO_TRACK if a.track_id is None else a.track_id for a in g], dtype=np.int64),
+            np.array([a.nis if a.outcome is Outcome.UPDATED and a.nis is not None else np.nan for a in g]),
+            at, np.array([q for a in g for q in a.gated], dtype=np.int64)))
+    return tuple(out)
+
+
+def _records(steps: Sequence[Any]) -> list[Any]:
+    """The steps with their associations as records, one per measurement (the reference's input)."""
+    return [(ms, [a for b in Bs for a in b.rows()], step, arr) for ms, Bs, step, arr in steps]
 
 
 def _scans(ms: list[_Point]) -> tuple[ScanPoints, ...]:

@@ -64,7 +64,7 @@ def _confirmed_track_and_a_tentative_one(init: InitConfig | None = None) -> tupl
     (conf,) = tr.confirmed()
     r = tr.process([Detection.of("cart", 3 * S, 6, [0.0, 0.0]), Detection.of("cart", 3 * S, 7, [6.0, 0.0])])
     born = [e.track_id for e in r.events if e.kind == EventKind.BORN]
-    assert born == [track_id_for("cart", 7, 3 * S)], r.associations
+    assert born == [track_id_for("cart", 7, 3 * S)], r.each_association()
     return tr, conf.id, born[0]
 
 
@@ -74,7 +74,7 @@ def test_a_measurement_in_both_gates_updates_the_confirmed_track() -> None:
     confirmed track, which therefore does not miss the scan."""
     tr, conf, tent = _confirmed_track_and_a_tentative_one()
     r = tr.process([Detection.of("cart", 3 * S + S // 2, 8, [2.2, 0.0])])
-    (a,) = r.associations
+    (a,) = r.each_association()
     assert set(a.gated) == {conf, tent}, a
     assert a.outcome == Outcome.UPDATED and a.track_id == conf
 
@@ -85,7 +85,7 @@ def test_confirmed_tracks_take_precedence_even_against_a_likelier_tentative_pair
     track (Stone Soup's order: confirmed tracks first, leftovers to the initiator)."""
     tr, conf, tent = _confirmed_track_and_a_tentative_one(InitConfig(velocity_std_mps=0.5))
     r = tr.process([Detection.of("cart", 3 * S + S // 2, 8, [3.5, 0.0])])
-    (a,) = r.associations
+    (a,) = r.each_association()
     assert set(a.gated) == {conf, tent}, a
     assert a.outcome == Outcome.UPDATED and a.track_id == conf
 
@@ -95,7 +95,7 @@ def test_leftovers_go_to_tentative_tracks() -> None:
     tr, conf, tent = _confirmed_track_and_a_tentative_one(InitConfig(velocity_std_mps=0.5))
     r = tr.process([Detection.of("cart", 3 * S + S // 2, 8, [0.1, 0.0]),
                     Detection.of("cart", 3 * S + S // 2, 9, [5.9, 0.0])])
-    got = {a.seq: a.track_id for a in r.associations}
+    got = {a.seq: a.track_id for a in r.each_association()}
     assert got == {8: conf, 9: tent}
 
 
@@ -112,8 +112,8 @@ def test_crossing_in_clutter_confirmed_tracks_do_not_lose_scans_to_tentative_one
         status = {t.id: t.status.label for t in tr.tracks}
         r = tr.process([d.det for d in batch])
         consumer.take(r)
-        updated = {a.track_id for a in r.associations if a.outcome == Outcome.UPDATED}
-        for a in r.associations:
+        updated = {a.track_id for a in r.each_association() if a.outcome == Outcome.UPDATED}
+        for a in r.each_association():
             if a.outcome == Outcome.UPDATED and status.get(a.track_id) == "tentative":
                 stolen += any(status.get(g) == "confirmed" and g not in updated for g in a.gated)
     assert stolen == 0

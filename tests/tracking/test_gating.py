@@ -49,7 +49,7 @@ def run(motion: MotionConfig, gate: type, seed: int) -> list:
     out = []
     for batch in scans(dets):
         r = tr.process([d.det for d in batch])
-        out.append([(a.seq, a.outcome.value, a.track_id, a.nis) for a in r.associations])
+        out.append([(a.seq, a.outcome.value, a.track_id, a.nis) for a in r.each_association()])
         out.append([(e.track_id, e.status, e.x, e.P, e.nis) for e in r.estimates])
     return out
 

@@ -110,7 +110,7 @@ def test_a_vanished_target_is_deleted_with_the_reason(lifecycle: LifecycleConfig
     for batch in scans(dets):
         result = tr.process([d.det for d in batch])
         consumer.take(result)
-        for a in result.associations:
+        for a in result.each_association():
             origin = next(d.origin for d in batch if d.det.seq == a.seq)
             if a.track_id is not None:
                 owner.setdefault(a.track_id, origin)

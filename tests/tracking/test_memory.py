@@ -26,7 +26,7 @@ def run_long(n_detections: int, *, seed: int, time: TimeConfig, lifecycle: Lifec
     while tr.counts.received < n_detections:
         batch = next(stream)
         result = tr.process(batch)
-        for a in result.associations:
+        for a in result.each_association():
             outcomes[a.outcome] = outcomes.get(a.outcome, 0) + 1
         window = (window + [len(batch)])[-(round(LAG_S / PERIOD_S) + 1):]
         assert tr.intake.seen_len <= sum(window)

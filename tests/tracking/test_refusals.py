@@ -68,8 +68,8 @@ def test_a_late_measurement_that_changes_nothing_emits_no_revision() -> None:
     result = tr.process([far])
     consumer.take(result)
     assert len(result.replays) == 1
-    assert all(e.track_id == result.associations[0].track_id for e in result.estimates if e.t_ns > 5 * S)
-    assert not [e for e in result.estimates if e.revision > 0 and e.track_id != result.associations[0].track_id]
+    assert all(e.track_id == result.each_association()[0].track_id for e in result.estimates if e.t_ns > 5 * S)
+    assert not [e for e in result.estimates if e.revision > 0 and e.track_id != result.each_association()[0].track_id]
 
 
 def refusal_of(tr, d: Detection) -> Reason | None:
@@ -193,7 +193,7 @@ def test_mixed_stream_counts_add_up_and_good_ones_are_applied() -> None:
                 outcome.append(None)
         assert not pending
         accepted = {(d.sensor_id, d.seq) for d, o in zip(batch, outcome[-len(batch):], strict=True) if o is None}
-        assert accepted <= {(a.sensor_id, a.seq) for a in result.associations}
+        assert accepted <= {(a.sensor_id, a.seq) for a in result.each_association()}
     c = tr.counts
     assert c.received == len(start) + len(mixed)
     assert c.received == c.applied + refused_total(c)

@@ -69,7 +69,7 @@ def _feed(h: hashlib._Hash, r: StepResult) -> None:
             _arr(h, a)
     for ev in r.events:
         h.update(repr(ev.key + (ev.retracted,)).encode())
-    for a in r.associations:
+    for a in r.each_association():  # record by record, as when each was a record of its own (the digests stand)
         h.update(repr((a.sensor_id, a.t_ns, a.seq, a.outcome.value, a.track_id, a.nis, a.gated)).encode())
     for sp in r.measurements:  # point by point, as when each was a record of its own (the digests stand)
         for seq, position in zip(sp.seq.tolist(), sp.position, strict=True):
