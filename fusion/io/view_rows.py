@@ -72,10 +72,12 @@ class ReviewBlocks:
     """The distinct Review blocks of some estimates (fusion.tracking.results.Review: a scan's
     estimates share theirs) and each estimate's block and row in it."""
 
-    __slots__ = ("blocks", "row", "which")
+    __slots__ = ("_flat", "blocks", "row", "which")
 
-    def __init__(self, blocks: list[Review | None], which: Array, row: Array) -> None:
+    def __init__(self, blocks: list[Review | None], which: Array, row: Array,
+                 flat: dict[tuple[str, int | None], tuple[Array, Array]] | None = None) -> None:
         self.blocks, self.which, self.row = blocks, which, row
+        self._flat = {} if flat is None else flat  # (field, cut): the blocks concatenated, each block's offset
 
     @classmethod
     def of(cls, estimates: Sequence[Estimate]) -> ReviewBlocks:
@@ -88,7 +90,7 @@ class ReviewBlocks:
 
     def subset(self, rows: Array) -> ReviewBlocks:
         """The same for the estimates `rows` (indices)."""
-        return ReviewBlocks(self.blocks, self.which[rows], self.row[rows])
+        return ReviewBlocks(self.blocks, self.which[rows], self.row[rows], self._flat)  # the same blocks
 
     def _arrays(self, name: str) -> list[Array | None]:
         """Each block's field `name` (None where there is no block, or it has not that field)."""
@@ -115,16 +117,21 @@ class ReviewBlocks:
 
     def take(self, name: str, at: Array, *, cut: int | None = None) -> Array:
         """The field's rows of the estimates `at` (each with the field), stacked (a new array):
-        the blocks concatenated whole (their first `cut` columns), then the rows picked."""
-        parts: list[Array] = []
-        off = np.zeros(len(self.blocks), dtype=np.int64)
-        o = 0
-        for k, a in enumerate(self._arrays(name)):
-            if a is not None:
-                parts.append(a if cut is None else a[:, :cut])
-                off[k] = o
-                o += len(a)
-        return np.concatenate(parts)[off[self.which[at]] + self.row[at]]
+        the blocks concatenated whole (their first `cut` columns; once per field, for this set of
+        blocks and its subsets), then the rows picked."""
+        got = self._flat.get((name, cut))
+        if got is None:
+            parts: list[Array] = []
+            off = np.zeros(len(self.blocks), dtype=np.int64)
+            o = 0
+            for k, a in enumerate(self._arrays(name)):
+                if a is not None:
+                    parts.append(a if cut is None else a[:, :cut])
+                    off[k] = o
+                    o += len(a)
+            got = self._flat[(name, cut)] = (np.concatenate(parts), off)
+        flat, off = got
+        return flat[off[self.which[at]] + self.row[at]]
 
 
 class Stacked:
