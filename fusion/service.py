@@ -37,7 +37,7 @@ from fusion import messages as m
 from fusion.config import ServiceConfig, mode_names
 from fusion.fixed_lag import FixedLagSmoother, smoothed_key
 from fusion.io import wire
-from fusion.io.burst import drain_burst
+from fusion.io.burst import Drained, drain_burst
 from fusion.io.checkpointer import Checkpointer, counts_since, service_checkpoint_path
 from fusion.io.gain_groups import measured_components
 from fusion.io.intake_queue import IntakeLimits, IntakeQueue
@@ -230,8 +230,9 @@ class Service:
     def _drain(self, limit: int) -> list[Record]:
         return self._q.drain(limit)
 
-    def _drain_burst(self, limit: int) -> list[Record]:
-        """A batch that takes the rest of a burst still arriving (fusion.io.burst)."""
+    def _drain_burst(self, limit: int) -> Drained:
+        """A batch that takes the rest of a burst still arriving, and whether it was cut before
+        the burst's end (fusion.io.burst)."""
         ic = self.config.intake
         return drain_burst(self._q, self._wake, limit, gap_s=ic.burst_gap_ms / 1e3, linger_s=ic.burst_linger_ms / 1e3)
 
@@ -291,9 +292,9 @@ class Service:
                     break
                 if self._writer is not None and self._q:
                     self._writer.loop_busy()  # the recording's thread waits for the loop's next pause
-                batch = self._drain_burst(batch_max)
+                batch, cut = self._drain_burst(batch_max)
                 if batch:
-                    self._step(batch, more=len(batch) >= batch_max and bool(self._q))
+                    self._step(batch, more=cut and bool(self._q))  # a cut burst's last scan waits for its rest
                     if not self._q:  # caught up: make the status answer current at once
                         self._refresh_status(force=True)
                         self._settled = self._processed + self._q.refused_total

@@ -12,7 +12,10 @@ rows in the recording than measurements.
 `drain_burst` drains up to `limit` samples; while the batch is short of `limit` and samples
 keep coming (one arrived within `gap_s` of the last look), it waits for them, at most
 `linger_s` after the first drain. A quiet queue costs one wait of `gap_s`; a backlog (full
-batches) none. What the tracker computes does not depend on how samples are batched (its
+batches) none. A batch that the limit or the linger cut while samples kept coming says so
+(`cut`): the service then holds its last scan for the next batch (fusion.pipeline's `more`) when
+more samples are queued, so a scan longer than the linger (a blast, a backlog) is not run in two
+parts either. What the tracker computes does not depend on how samples are batched (its
 results are a function of the accepted measurements), only how many revisions it reports on
 the way.
 """
@@ -21,27 +24,38 @@ from __future__ import annotations
 
 import threading
 import time
+from typing import NamedTuple
 
 from fusion.io.intake_queue import IntakeQueue, Record
 
 
-def drain_burst(q: IntakeQueue, wake: threading.Event, limit: int, *, gap_s: float, linger_s: float) -> list[Record]:
+class Drained(NamedTuple):
+    """A batch, and whether it was cut while its burst was still arriving (`cut`: the limit
+    reached, or the linger over with samples still coming; not when a gap ended it), so that its
+    last scan may be missing its rest."""
+
+    batch: list[Record]
+    cut: bool
+
+
+def drain_burst(q: IntakeQueue, wake: threading.Event, limit: int, *, gap_s: float, linger_s: float) -> Drained:
     """The oldest `limit` samples of `q`, including those of a burst still arriving (module
     docstring). `wake` is set by the producer when it queues a sample; it is cleared here before
     each look at the queue, so a sample queued after the look sets it again."""
     batch = q.drain(limit)
     if not batch or linger_s <= 0.0 or gap_s <= 0.0:
-        return batch
+        return Drained(batch, len(batch) >= limit)
     end = time.monotonic() + linger_s
     while len(batch) < limit:
         left = end - time.monotonic()
         if left <= 0.0:
-            break
+            return Drained(batch, True)  # samples still coming when the linger ran out
         wake.clear()
         if not len(q) and not wake.wait(min(gap_s, left)) and not len(q):
             # nothing for gap_s, and nothing queued by the time this thread runs again (a wait's
             # timeout is seen only once it holds the GIL again, and a callback holding the GIL
-            # first may have queued the burst's next samples meanwhile): the burst is over
-            break
+            # first may have queued the burst's next samples meanwhile): the burst is over,
+            # unless the linger cut this wait short of gap_s
+            return Drained(batch, left < gap_s)
         batch.extend(q.drain(limit - len(batch)))
-    return batch
+    return Drained(batch, True)

@@ -1,14 +1,14 @@
 """fusion.io.burst.drain_burst on the real intake queue, fed by a producer thread as Zenoh's
 callbacks feed it: a burst with short pauses comes out as one batch, a pause longer than the gap
-ends the batch, the wait is capped by the linger and by the batch limit, and with no linger it is
-the plain drain."""
+ends the batch, the wait is capped by the linger and by the batch limit (the batch then says it
+was cut while its burst was still arriving), and with no linger it is the plain drain."""
 
 from __future__ import annotations
 
 import threading
 import time
 
-from fusion.io.burst import drain_burst
+from fusion.io.burst import Drained, drain_burst
 from fusion.io.intake_queue import IntakeLimits, IntakeQueue
 
 KEY = "fusion/demo/meas/radar1"
@@ -38,8 +38,8 @@ def producer(q: IntakeQueue, wake: threading.Event, parts: list[int], pause_s: f
     return t
 
 
-def first_batch(q: IntakeQueue, wake: threading.Event, **kw: float) -> list:
-    """The batch drain_burst returns once the first sample is there."""
+def first_batch(q: IntakeQueue, wake: threading.Event, **kw: float) -> Drained:
+    """What drain_burst returns once the first sample is there."""
     assert wake.wait(5.0)
     return drain_burst(q, wake, kw.pop("limit", 10_000), **kw)  # type: ignore[arg-type]
 
@@ -48,9 +48,9 @@ def test_a_burst_with_pauses_shorter_than_the_gap_is_one_batch() -> None:
     q, wake = queue(), threading.Event()
     t = producer(q, wake, [1, 300, 300], pause_s=0.02)
     t.start()
-    batch = first_batch(q, wake, gap_s=0.2, linger_s=5.0)
+    batch, cut = first_batch(q, wake, gap_s=0.2, linger_s=5.0)
     t.join()
-    assert len(batch) == 601
+    assert len(batch) == 601 and not cut  # ended by the quiet after it
     assert [int.from_bytes(r[2], "little") for r in batch] == list(range(601))  # in arrival order
     assert len(q) == 0
 
@@ -59,18 +59,18 @@ def test_a_pause_longer_than_the_gap_ends_the_batch() -> None:
     q, wake = queue(), threading.Event()
     t = producer(q, wake, [200, 200], pause_s=0.5)
     t.start()
-    batch = first_batch(q, wake, gap_s=0.05, linger_s=5.0)
+    batch, cut = first_batch(q, wake, gap_s=0.05, linger_s=5.0)
     t.join()
-    assert len(batch) == 200 and len(q) == 200
+    assert len(batch) == 200 and len(q) == 200 and not cut
 
 
 def test_no_linger_is_the_plain_drain() -> None:
     q, wake = queue(), threading.Event()
     t = producer(q, wake, [1, 300], pause_s=0.3)
     t.start()
-    batch = first_batch(q, wake, gap_s=1.0, linger_s=0.0)
+    batch, cut = first_batch(q, wake, gap_s=1.0, linger_s=0.0)
     t.join()
-    assert len(batch) == 1 and len(q) == 300
+    assert len(batch) == 1 and len(q) == 300 and not cut  # short of the limit: as before, not cut
 
 
 def test_the_wait_is_capped_by_the_linger_and_by_the_limit() -> None:
@@ -89,14 +89,14 @@ def test_the_wait_is_capped_by_the_linger_and_by_the_limit() -> None:
     try:
         assert wake.wait(5.0)
         t0 = time.monotonic()
-        batch = drain_burst(q, wake, 100_000, gap_s=0.05, linger_s=0.3)
+        batch, cut = drain_burst(q, wake, 100_000, gap_s=0.05, linger_s=0.3)
         took = time.monotonic() - t0
-        assert 0.3 <= took < 2.0 and len(batch) > 1
+        assert 0.3 <= took < 2.0 and len(batch) > 1 and cut  # the linger ran out, samples still coming
         while len(q) < 5:
             time.sleep(0.005)
         t0 = time.monotonic()
-        batch = drain_burst(q, wake, 5, gap_s=0.05, linger_s=30.0)
-        assert len(batch) == 5 and time.monotonic() - t0 < 5.0
+        batch, cut = drain_burst(q, wake, 5, gap_s=0.05, linger_s=30.0)
+        assert len(batch) == 5 and time.monotonic() - t0 < 5.0 and cut  # the limit reached
     finally:
         stop.set()
         t.join()
@@ -124,5 +124,5 @@ def test_samples_queued_as_the_gap_s_wait_times_out_stay_in_the_batch() -> None:
 
     wake = LateWake()
     offer(q, wake, 0)
-    batch = drain_burst(q, wake, 10_000, gap_s=0.01, linger_s=1.0)
-    assert [int.from_bytes(r[2], "little") for r in batch] == [0, 100, 101]
+    batch, cut = drain_burst(q, wake, 10_000, gap_s=0.01, linger_s=1.0)
+    assert [int.from_bytes(r[2], "little") for r in batch] == [0, 100, 101] and not cut
