@@ -144,12 +144,15 @@ def _added_pairs(ts: TrackSet, changed: np.ndarray, new: np.ndarray, points: tup
     return np.concatenate(ids), np.concatenate(sq)
 
 
+_COUNTED_CODES = (OUTCOME_CODE[Outcome.UPDATED], OUTCOME_CODE[Outcome.BORN])  # association_kernels.counted's
+
+
 def _tally_of(assoc: ScanAssociations, rows: np.ndarray, events: list) -> Counter:
     """The tally of a part of a scan from what it did (fusion.tracking.scan counts the same):
     updates, births and unassigned (in a gate, not taken) from the associations `rows`;
     confirmations and deletions from the events. Used for parts without capacity refusals."""
     t: Counter = Counter()
-    counts = counted(assoc.outcome, assoc.gated_at, rows, OUTCOME_CODE[Outcome.UPDATED], OUTCOME_CODE[Outcome.BORN])
+    counts = counted(assoc.outcome, assoc.gated_at, rows, *_COUNTED_CODES)
     for kind, n in zip((Tally.UPDATES, Tally.UNASSIGNED, Tally.BIRTHS), counts, strict=True):
         if n:
             t[kind] += n

@@ -297,4 +297,5 @@ class StepResult:
 
     @property
     def n_associations(self) -> int:
+        """The associations' rows: one per measurement of every scan run (again)."""
         return sum(len(block) for block in self.associations)

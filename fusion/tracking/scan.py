@@ -44,6 +44,9 @@ from fusion.tracking.results import (
 from fusion.tracking.trackset import ROW_FIELDS, Layout, Rows, Status, TrackSet, track_id_for
 
 _LABELS = {int(s): s.label for s in Status}
+# association_kernels.built's codes: no track, then updated, born, unassigned, capacity
+_BUILT_CODES = (NO_TRACK, *(OUTCOME_CODE[o] for o in (Outcome.UPDATED, Outcome.BORN, Outcome.UNASSIGNED,
+                                                       Outcome.CAPACITY)))
 
 
 class Tally(StrEnum):
@@ -184,7 +187,7 @@ def _births_and_associations(ts: TrackSet, key: ScanKey, dets: tuple[Detection, 
     taken = np.asarray(pairs, dtype=np.intp)
     outcome, track_id, nis, at, births, unassigned, refused = built(
         len(dets), gated.mj.astype(np.int64, copy=False), gids, gated.nis, taken, max(ctx.max_tracks - len(ts), 0),
-        NO_TRACK, *(OUTCOME_CODE[o] for o in (Outcome.UPDATED, Outcome.BORN, Outcome.UNASSIGNED, Outcome.CAPACITY)))
+        *_BUILT_CODES)
     born = _born_rows(ts, [dets[j] for j in births.tolist()], mpos[births], sm, ctx)
     track_id[births] = born.ids
     tally[Tally.UNASSIGNED] += unassigned
