@@ -61,7 +61,7 @@ from typing import Any
 import numpy as np
 
 from fusion.core.checks import Array
-from fusion.io import step_rows, track_rows
+from fusion.io import step_rows, track_rows, view_kernels
 from fusion.io.columns import Column, stack
 from fusion.io.derive import world
 from fusion.io.labels import short_id
@@ -117,6 +117,7 @@ class RerunSink:
         run_id: str | None = None, pause: Callable[[], None] | None = None,
     ) -> None:
         self.run_id = run_id or uuid.uuid4().hex  # a new run unless continuing one (fusion.io.recording)
+        view_kernels.warm()  # the view flushes' compiled loops, before any data
         info = {"layout": list(layout), "position_indices": list(position_indices),
                 "velocity_indices": list(velocity_indices), "labels": "fusion.io.labels.short_id", **(meta or {}),
                 "run_id": self.run_id}

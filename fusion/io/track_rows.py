@@ -19,7 +19,7 @@ from fusion.core.checks import Array
 from fusion.io import derive, gain_groups, trail
 from fusion.io.labels import short_id
 from fusion.io.palette import colour, series_colours
-from fusion.io.view_rows import ReviewBlocks, Stacked
+from fusion.io.view_rows import EstimateColumns, ReviewBlocks, Stacked
 from fusion.io.viewed import ViewedTracks
 from fusion.tracking.results import Estimate
 
@@ -144,18 +144,17 @@ class Rows:
         nees = np.full(n, np.nan)
         if m_idx.size:
             nees[m_idx] = derive.nees(err[m_idx], P[m_idx], self.ki)
-        target = [""] * n
-        for i, name in zip(m_idx.tolist(), targets, strict=True):
-            target[i] = name
+        target = np.full(n, "", dtype=object)
+        target[m_idx] = targets
         matched = np.zeros(n, dtype=bool)
         matched[m_idx] = True
-        nis = np.array([e.nis for e in E_], dtype=np.float64)  # None (a birth's) as NaN
+        cols = EstimateColumns.of(E_)
         nis_dof = rv.width("y")
-        ids = [e.track_id for e in E_]
-        rec.extend(t, step, arr, track=ids, label=[short_id(i) for i in ids], sensor=[e.sensor_id for e in E_],
+        ids = cols.ids.tolist()
+        rec.extend(t, step, arr, track=ids, label=[short_id(i) for i in ids], sensor=cols.sensor.tolist(),
                    seq=[e.seq for e in E_], status=status, revision=[e.revision for e in E_],
-                   blocks={"x": X, "std": std, "error": err}, nis=nis, nis_dof=nis_dof,
-                   nees=nees, nees_dof=np.where(matched, len(self.ki), 0), target=target)
+                   blocks={"x": X, "std": std, "error": err}, nis=cols.nis, nis_dof=nis_dof,
+                   nees=nees, nees_dof=np.where(matched, len(self.ki), 0), target=target.tolist())
         W = derive.world(X[:, self.pi])
         conf = np.fromiter(map(eq, status, repeat("confirmed")), dtype=bool, count=len(status))
         if conf.any():
@@ -168,12 +167,12 @@ class Rows:
                     t[mask], step[mask], arr[mask], p=W[mask][:, None, :])
         self._set_distances(sink, t, step, arr, W, conf, ids)
         kept = self.choice.kept_ids()
-        sel = np.flatnonzero(conf & np.isin(np.array(ids, dtype=np.int64), kept)) if kept else np.empty(0, np.int64)
+        sel = np.flatnonzero(conf & np.isin(cols.ids, kept)) if kept else np.empty(0, np.int64)
         if not sel.size:
             return None
         return Stacked.of([E_[i] for i in sel.tolist()], t[sel], step[sel], arr[sel], X[sel], P[sel], std[sel],
                           err[sel], matched[sel], nees[sel], TX_full(TX, m_idx, X.shape)[sel], W[sel], conf=conf[sel],
-                          n_pos=len(self.pi), blocks=rv.subset(sel))
+                          n_pos=len(self.pi), blocks=rv.subset(sel), columns=cols.take(sel))
 
     def views(self, batches: list[Stacked], sink: Any, *, pause: Callable[[], None]) -> None:
         """The viewed tracks' time series and cursor marks, from their rows of the record flushes

@@ -15,12 +15,11 @@ the last drawn one (revisions after late data) are not drawn again.
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from fusion.core.checks import Array
 from fusion.io.derive import eig_sym2
+from fusion.io.view_kernels import trail_rows
 
 SPACING = 1.25  # gap between neighbouring trail ellipses, as a multiple of the sum of their radii
 
@@ -36,20 +35,16 @@ def pick(t_ns: Array, pos: Array, r: Array, last: tuple[int, Array, float] | Non
          ) -> tuple[list[int], tuple[int, Array, float] | None]:
     """Rows (in the given order) to draw, and the new last drawn (t_ns, position, radius).
     t_ns (n,), pos (n, k), r (n,): one track's rows; `last`: what was drawn before (or None).
-    Each choice depends on the one before, so this is a loop, over Python floats with math.dist
-    (a numpy call per row cost ~5 us; this ~0.5)."""
-    out: list[int] = []
-    T, X, R = t_ns.tolist(), np.asarray(pos, dtype=np.float64).tolist(), np.asarray(r, dtype=np.float64).tolist()
+    Each choice depends on the one before: a compiled loop (fusion.io.view_kernels.trail_rows;
+    a Python loop over floats cost ~0.5 us a row, numpy per row ~5)."""
+    pos = np.ascontiguousarray(pos, dtype=np.float64)
+    k = pos.shape[1]
     if last is None:
-        lt, lp, lr = None, None, 0.0
+        has, lt, lp, lr = False, 0, np.zeros(k), 0.0
     else:
-        lt, lp, lr = int(last[0]), np.asarray(last[1], dtype=np.float64).tolist(), float(last[2])
-    for i, (ti, pi, ri) in enumerate(zip(T, X, R, strict=True)):
-        if lt is None or (ti > lt and math.dist(pi, lp) >= SPACING * (lr + ri)):
-            out.append(i)
-            lt, lp, lr = ti, pi, ri
-    if lt is None:
-        return out, None
-    if out or last is None:
-        return out, (lt, np.array(lp, dtype=np.float64), lr)
-    return out, last
+        has, lt, lp, lr = True, int(last[0]), np.asarray(last[1], dtype=np.float64), float(last[2])
+    rows, t1, p1, r1 = trail_rows(np.ascontiguousarray(t_ns, dtype=np.int64), pos,
+                                  np.ascontiguousarray(r, dtype=np.float64), has, lt, lp, lr, SPACING)
+    if rows.size or (last is None and len(pos)):
+        return rows.tolist(), (int(t1), p1, float(r1))
+    return [], last

@@ -19,8 +19,8 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from itertools import compress, repeat
-from operator import is_not
-from typing import Any
+from operator import attrgetter, is_not
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -66,6 +66,27 @@ def _filled(present: Array, values: Sequence[Array | None], shape: tuple[int, ..
     if present.any():
         out[present] = stack(list(compress(values, present.tolist())))
     return out
+
+
+class EstimateColumns(NamedTuple):
+    """What a flush reads of each estimate beside its arrays, as columns: track id (n,) int64,
+    NIS (n,) float64 (NaN where there is none), whether it has one (n,) bool, sensor (n,) object."""
+
+    ids: Array
+    nis: Array
+    has_nis: Array
+    sensor: Array
+
+    @classmethod
+    def of(cls, estimates: Sequence[Estimate]) -> EstimateColumns:
+        n = len(estimates)
+        niss = list(map(attrgetter("nis"), estimates))
+        return cls(np.fromiter(map(attrgetter("track_id"), estimates), dtype=np.int64, count=n),
+                   np.array(niss, dtype=np.float64), _present(niss),  # None (a birth's) as NaN
+                   np.array(list(map(attrgetter("sensor_id"), estimates)), dtype=object))
+
+    def take(self, rows: Array) -> EstimateColumns:
+        return EstimateColumns(self.ids[rows], self.nis[rows], self.has_nis[rows], self.sensor[rows])
 
 
 class ReviewBlocks:
@@ -152,16 +173,17 @@ class Stacked:
     @classmethod
     def of(cls, estimates: list[Estimate], t: Array, step: Array, arr: Array, X: Array, P: Array, std: Array,
            err: Array, matched: Array, nees: Array, TX: Array, W: Array, *, conf: Array, n_pos: int,
-           blocks: ReviewBlocks | None = None) -> Stacked:
+           blocks: ReviewBlocks | None = None, columns: EstimateColumns | None = None) -> Stacked:
         """The rows of `estimates` (the arrays' rows, in their order; every array a copy of its
         own), with the first `n_pos` components of their measured positions. What the
         estimates' Review blocks hold is read block by block (`blocks`, theirs, or found here),
-        not estimate by estimate."""
+        not estimate by estimate, and their ids, NIS and sensors from `columns` (theirs, or
+        read here)."""
         d = X.shape[1]
-        # one list per field: a comprehension per field is faster than one pass unzipped
         E = estimates
-        niss, sensors, mus = [e.nis for e in E], [e.sensor_id for e in E], [e.mode_probabilities for e in E]
+        mus = list(map(attrgetter("mode_probabilities"), E))
         rv = ReviewBlocks.of(E) if blocks is None else blocks
+        cols = EstimateColumns.of(E) if columns is None else columns
         prior = X.copy()
         has_prior = rv.has("prior_x")
         if has_prior.any():
@@ -176,12 +198,11 @@ class Stacked:
             meas_pos = np.full((len(E), n_pos), np.nan)
         mode = _present(mus)
         mu = _filled(mode, mus, np.shape(mus[int(np.argmax(mode))])) if mode.any() else None
-        innovated = rv.has("y") & rv.has("S") & _present(niss)
+        innovated = rv.has("y") & rv.has("S") & cols.has_nis
         gains = rv.has("H") & rv.has("prior_P")
-        names = np.array(sensors, dtype=object)
         updates = {}
-        for sensor in sorted(set(sensors)):
-            ks = np.flatnonzero(innovated & (names == sensor))
+        for sensor in sorted(set(cols.sensor.tolist())):
+            ks = np.flatnonzero(innovated & (cols.sensor == sensor))
             if not ks.size:
                 continue
             Y = rv.take("y", ks)
@@ -192,9 +213,8 @@ class Stacked:
             if gain.any():
                 H, Pm = rv.take("H", ks[gain]), rv.take("prior_P", ks[gain])
                 K[gain] = np.swapaxes(np.linalg.solve(S[gain], H @ Pm), 1, 2)  # P- H' S^-1, S symmetric
-            updates[sensor] = Updates(ks, Y, S, np.array([niss[k] for k in ks.tolist()], dtype=np.float64), gain, K)
-        ids = np.array([e.track_id for e in E], dtype=np.int64)
-        return cls(t, step, arr, X, P, std, err, matched, nees, TX, W, ids=ids, conf=conf, prior=prior, meas=meas,
+            updates[sensor] = Updates(ks, Y, S, cols.nis[ks], gain, K)
+        return cls(t, step, arr, X, P, std, err, matched, nees, TX, W, ids=cols.ids, conf=conf, prior=prior, meas=meas,
                    meas_pos=meas_pos, mode=mode, mu=mu, updates=updates)
 
     @classmethod
