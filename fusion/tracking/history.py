@@ -20,12 +20,48 @@ from collections import Counter
 from collections.abc import Set as AbstractSet
 from dataclasses import dataclass, field
 
+import numpy as np
+
 from fusion.tracking.detection import Detection
 from fusion.tracking.replay import Gates
 from fusion.tracking.results import Estimate, ScanAssociations, ScanKey, TrackEvent
+from fusion.tracking.revision_kernel import ALIVE, IDS, REV, SIG, revised
 from fusion.tracking.trackset import TrackSet
 
 Revision = tuple[int, int, bool]  # (revision, signature, alive)
+
+
+class Emitted:
+    """What a scan reported last of each track's estimate: a table (fusion.tracking.revision_kernel:
+    one (4, k) int64 array sorted by track id: its revision, signature (_signature) and whether
+    it is alive, not retracted), where a dict of tuples cost ~120 bytes a track a scan (4 kB a
+    track over a 2 s window); `emitted[track_id]` reads one row as a Revision. Never changed."""
+
+    __slots__ = ("table",)
+
+    def __init__(self, table: np.ndarray) -> None:
+        self.table = table
+
+    def __len__(self) -> int:
+        return self.table.shape[1]
+
+    def _at(self, track_id: int) -> int:
+        ids = self.table[IDS]
+        i = int(np.searchsorted(ids, track_id))
+        return i if i < len(ids) and ids[i] == track_id else -1
+
+    def __contains__(self, track_id: int) -> bool:
+        return self._at(track_id) >= 0
+
+    def __getitem__(self, track_id: int) -> Revision:
+        i = self._at(track_id)
+        if i < 0:
+            raise KeyError(track_id)
+        return int(self.table[REV, i]), int(self.table[SIG, i]), bool(self.table[ALIVE, i])
+
+
+NONE_EMITTED = Emitted(np.empty((4, 0), dtype=np.int64))
+_NO_IDS = np.empty(0, dtype=np.int64)
 
 
 @dataclass
@@ -35,7 +71,7 @@ class Entry:
     key: ScanKey
     dets: tuple[Detection, ...]
     before: TrackSet
-    emitted: dict[int, Revision] = field(default_factory=dict)  # track id -> latest reported
+    emitted: Emitted = NONE_EMITTED  # track id -> latest reported
     events: dict[tuple[str, int, int, str], TrackEvent] = field(default_factory=dict)
     tally: Counter = field(default_factory=Counter)
     associations: ScanAssociations | None = None  # what its run did with each detection
@@ -116,29 +152,22 @@ def _signature(e: Estimate) -> int:
 def revise(entry: Entry, prev: Entry | None, new: list[Estimate], kept: AbstractSet[int] = frozenset()
            ) -> list[Estimate]:
     """The estimates to report for a scan run (again): see the module docstring. `kept`: tracks
-    of a partial re-run (fusion.tracking.replay) whose stored estimates stand as they were."""
-    old = prev.emitted if prev else {}
-    entry.emitted.update(old)  # every track old holds ends up in entry: produced, standing or retracted
-    out: list[Estimate] = []
-    produced: set[int] = set()
-    for e in new:
-        sig = _signature(e)
-        produced.add(e.track_id)
-        o = old.get(e.track_id)
-        if o is not None and o[2] and o[1] == sig:
-            entry.emitted[e.track_id] = o
-            continue
-        rev = 0 if o is None else o[0] + 1
-        entry.emitted[e.track_id] = (rev, sig, True)
-        out.append(e.with_revision(rev))
-    gone = old.keys() - produced
-    stand = gone & kept if kept else set()  # kept tracks' stored estimates stand (a partial re-run): as copied
-    for tid in sorted(gone - stand):
-        rev, sig, alive = old[tid]
-        if alive:
-            rev += 1
-            out.append(Estimate.retraction((tid, entry.key[0], entry.key[1]), rev))
-        entry.emitted[tid] = (rev, sig, False)
+    of a partial re-run (fusion.tracking.replay) whose stored estimates stand as they were.
+    Every track the previous run reported ends up in entry.emitted: produced again (unchanged:
+    as it was; changed: revision + 1), standing (kept) or retracted (revision + 1 if it was
+    alive): one compiled call (fusion.tracking.revision_kernel.revised). The estimates reported
+    come in the order given, then the retractions by track id."""
+    old = prev.emitted if prev else NONE_EMITTED
+    n = len(new)
+    produced = np.empty((2, n), dtype=np.int64)  # track ids, signatures
+    produced[0] = np.fromiter((e.track_id for e in new), dtype=np.int64, count=n)
+    produced[1] = np.fromiter((_signature(e) for e in new), dtype=np.int64, count=n)
+    kept_ids = np.fromiter(kept, dtype=np.int64, count=len(kept)) if kept else _NO_IDS
+    same, rev, gone, table = revised(old.table, produced, kept_ids)
+    entry.emitted = Emitted(table)
+    out = [e.with_revision(r) for e, r, s in zip(new, rev.tolist(), same.tolist(), strict=True) if not s]
+    t_ns, sensor_id = entry.key
+    out.extend(Estimate.retraction((tid, t_ns, sensor_id), r) for tid, r in zip(*gone.tolist(), strict=True))
     return out
 
 
