@@ -45,6 +45,6 @@ def pick(t_ns: Array, pos: Array, r: Array, last: tuple[int, Array, float] | Non
         has, lt, lp, lr = True, int(last[0]), np.asarray(last[1], dtype=np.float64), float(last[2])
     rows, t1, p1, r1 = trail_rows(np.ascontiguousarray(t_ns, dtype=np.int64), pos,
                                   np.ascontiguousarray(r, dtype=np.float64), has, lt, lp, lr, SPACING)
-    if rows.size or (last is None and len(pos)):
+    if rows.size:  # (with nothing drawn before, the first row is: rows is empty only without rows)
         return rows.tolist(), (int(t1), p1, float(r1))
     return [], last

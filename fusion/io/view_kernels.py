@@ -6,6 +6,8 @@ multiply-adds (fastmath off), so the points are the same to the last bit."""
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 from numba import njit
 
@@ -58,19 +60,14 @@ def trail_rows(t_ns: np.ndarray, pos: np.ndarray, r: np.ndarray, has_last: bool,
     return out[:m], lt, lp, lr
 
 
+@functools.cache
 def warm() -> None:
     """Compile (or load from numba's cache) both kernels on tiny inputs: a recording's first view
     flush comes ~15 s into a file, and a first compile there (seconds, holding the GIL) would
-    stall the service's loop. Called when a sink is made; a no-op once loaded."""
-    if _warm:
-        return
+    stall the service's loop. Called when a sink is made; once per process."""
     circle = np.zeros((2, 2))
     for dtype in (np.float32, np.float64):
         ellipse_outline(np.zeros((1, 2)), np.zeros(1), np.zeros(1), np.zeros(1), np.zeros(1), circle,
                         np.zeros((1, 2, 3), dtype=dtype))
     for k in (2, 3):
         trail_rows(np.zeros(1, dtype=np.int64), np.zeros((1, k)), np.zeros(1), False, 0, np.zeros(k), 0.0, 1.0)
-    _warm.append(True)
-
-
-_warm: list[bool] = []
