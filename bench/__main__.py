@@ -3,7 +3,9 @@
 every `--soak-every-s` (bench.soak). `--only recording_ab` (never in the default run): the
 recording on its own thread against on the loop, `--pairs` interleaved pairs (bench.recording_ab).
 `--only tree_ab --base REV` (never in the default run): the working tree's service against the
-service of a git revision, `--pairs` interleaved pairs (bench.tree_ab).
+service of a git revision, `--pairs` interleaved pairs (bench.tree_ab). `--only handover` (never
+in the default run): a callback per sample against the service's channel threads, `--pairs`
+interleaved pairs (bench.intake_handover).
 
 Each benchmark measures its baselines in the same run, interleaved, and prints ratios. The
 machine's state (other processes) moves absolute figures; the ratios are the comparison.
@@ -47,10 +49,11 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--quick", action="store_true", help="fewer repeats and sizes (~1 minute)")
     p.add_argument("--only", default="e2e,core,tracker,gospa,recording,intake,late",
                    help="comma-separated: e2e, core, tracker, gospa, recording, intake, late;"
-                        " soak, recording_ab, tree_ab (not in the default)")
+                        " soak, recording_ab, tree_ab, handover (not in the default)")
     p.add_argument("--soak-s", type=float, default=600.0, help="duration of the soak (default 600 s)")
     p.add_argument("--soak-every-s", type=float, default=10.0, help="the soak's sampling period (default 10 s)")
-    p.add_argument("--pairs", type=int, default=3, help="recording_ab, tree_ab: interleaved pairs (default 3)")
+    p.add_argument("--pairs", type=int, default=3,
+                   help="recording_ab, tree_ab, handover: interleaved pairs (default 3)")
     p.add_argument("--base", default="HEAD", help="tree_ab: the git revision the working tree is compared with")
     p.add_argument("--json", type=Path, help="also write the figures to this file")
     args = p.parse_args(argv)
@@ -76,6 +79,10 @@ def main(argv: list[str] | None = None) -> int:
             from bench import recording_ab
 
             results["recording_ab"] = recording_ab.run(pairs=args.pairs, quick=args.quick)
+        elif name == "handover":
+            from bench import intake_handover
+
+            results["handover"] = intake_handover.run(pairs=args.pairs, quick=args.quick)
         elif name == "tree_ab":
             from bench import tree_ab
 

@@ -355,7 +355,10 @@ class IntakeConfig(Section):
     within `burst_gap_ms` of the last, for at most `burst_linger_ms` (0: no wait), so a sensor's
     scan reaches the tracker whole instead of run again for its second half.
     `drain_deadline_s`: at shutdown, the queue is drained for at most this long; what is left is
-    dropped and counted as "shutdown" (the recording is then closed complete)."""
+    dropped and counted as "shutdown" (the recording is then closed complete).
+    Before the queue, each subscriber's samples wait in a Zenoh channel of `channel_capacity`
+    samples until its intake thread takes them (fusion.io.channel_intake); a full channel makes
+    Zenoh wait."""
 
     queue_max: Annotated[int, msgspec.Meta(ge=1)] = 200_000
     queue_max_bytes: Annotated[int, msgspec.Meta(ge=1)] = 256_000_000
@@ -366,6 +369,7 @@ class IntakeConfig(Section):
     burst_gap_ms: NonNegFloat = 2.0
     burst_linger_ms: NonNegFloat = 20.0
     drain_deadline_s: NonNegFloat = 10.0
+    channel_capacity: Annotated[int, msgspec.Meta(ge=1)] = 4096
     max_future_wall_s: PosFloat = 3600.0  # refuse sensor times this far ahead of the wall clock
 
     def __post_init__(self) -> None:

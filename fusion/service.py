@@ -1,11 +1,13 @@
 """The fusion service: Zenoh in, tracker, estimates out over Zenoh, every step to Rerun.
 
-Threads: Zenoh's callback threads only offer (arrival_ns, key, payload) to the intake queue
+Threads: the subscribers hand their samples to Zenoh channels, and a thread per channel takes
+them in chunks (fusion.io.channel_intake: one hand-over of the GIL per chunk, where a callback
+cost one per sample) and only offers (arrival_ns, key, payload) to the intake queue
 (fusion.io.intake_queue: a byte limit per message checked before the payload is copied, bounds
 in samples and bytes, per-source rate limits and fair queueing, every refusal counted by reason)
-and wake the loop; the thread that calls `run` owns the tracker and does everything else, so
-memory stays bounded and a Zenoh channel is never left undrained. The loop drains batches that
-end where a burst of samples ends (fusion.io.burst), so a sensor's scan is run once, whole.
+and wakes the loop; the thread that calls `run` owns the tracker and does everything else, so
+memory stays bounded. The loop drains batches that end where a burst of samples ends
+(fusion.io.burst), so a sensor's scan is run once, whole.
 
 Queryables (answers prepared by the loop, so callbacks never touch the tracker):
   fusion/<ns>/status     ServiceStatus (msgpack)
@@ -38,6 +40,7 @@ from fusion.config import ServiceConfig, mode_names
 from fusion.fixed_lag import FixedLagSmoother, smoothed_key
 from fusion.io import wire
 from fusion.io.burst import Drained, drain_burst
+from fusion.io.channel_intake import ChannelIntake, Taken
 from fusion.io.checkpointer import Checkpointer, counts_since, service_checkpoint_path
 from fusion.io.gain_groups import measured_components
 from fusion.io.intake_queue import IntakeLimits, IntakeQueue
@@ -95,6 +98,7 @@ class Service:
                                            burst=ic.source_burst), known=known)
         self._shutdown_dropped = 0
         self._wake = threading.Event()
+        self._channels: ChannelIntake | None = None  # the subscribers' channels, once open()
         self._stop = threading.Event()
         self._processed = 0
         self._settled = 0  # samples fully handled (published, status refreshed) when the queue last emptied
@@ -124,12 +128,17 @@ class Service:
         return self._q
 
     # ---- Zenoh side ----------------------------------------------------------------------------
-    def _on_sample(self, sample: Any) -> None:
-        payload = sample.payload
-        queued = self._q.offer(time.time_ns(), str(sample.key_expr), len(payload), payload.to_bytes) is None
-        # Event.set takes the event's lock even when it is set (0.55 us against 0.03 for is_set, on
-        # every sample of a backlog); a set event is safe to skip: the loop clears it only before
-        # its next drain, which takes this sample (and marks itself busy first if samples wait)
+    def _take(self, taken: Taken) -> None:
+        """Samples from a subscriber's channel (fusion.io.channel_intake) into the intake queue;
+        the loop woken if one was queued."""
+        offer, queued = self._q.offer, False
+        for arrival_ns, sample in taken:
+            payload = sample.payload
+            if offer(arrival_ns, str(sample.key_expr), len(payload), payload.to_bytes) is None:
+                queued = True
+        # Event.set takes the event's lock even when it is set (0.55 us against 0.03 for is_set);
+        # a set event is safe to skip: the loop clears it only before its next drain, which takes
+        # these samples (and marks itself busy first if samples wait)
         if queued and not self._wake.is_set():
             if self._writer is not None:
                 self._writer.loop_busy()  # the recording's thread stops at its next pause (fusion.io.sink_thread)
@@ -212,13 +221,16 @@ class Service:
             raise
         self._refresh_status(force=True)
         s = self.session
+        fifo = self._zenoh.handlers.FifoChannel
+        cap = self.config.intake.channel_capacity
         self._decls = [
-            RecoveringSubscription(s, wire.all_measurements_key(self.ns), self._on_sample),
-            RecoveringSubscription(s, wire.all_input_key(self.ns), self._on_sample),
-            s.declare_subscriber(wire.all_truth_key(self.ns), self._on_sample),
+            RecoveringSubscription(s, wire.all_measurements_key(self.ns), fifo(cap)),
+            RecoveringSubscription(s, wire.all_input_key(self.ns), fifo(cap)),
+            s.declare_subscriber(wire.all_truth_key(self.ns), fifo(cap)),
             s.declare_queryable(wire.status_key(self.ns), self._on_status),
             s.declare_queryable(wire.snapshot_key(self.ns), self._on_snapshot),
         ]
+        self._channels = ChannelIntake([d.handler for d in self._decls[:3]], self._take)
         log.info("fusion service on namespace %r, zenoh %s %s", self.ns, zc.mode, zc.listen if zc.mode == "peer"
                  else zc.connect)
 
@@ -323,6 +335,8 @@ class Service:
             return
         for d in self._decls[:3]:  # subscribers: no more intake
             d.undeclare()
+        if self._channels is not None and not self._channels.join():  # what their channels held, queued
+            log.warning("shutdown: a Zenoh channel's intake thread did not end")
         deadline = time.monotonic() + self.config.intake.drain_deadline_s
         while self._q and time.monotonic() < deadline:
             self._step(self._drain(self.config.intake.batch_max))

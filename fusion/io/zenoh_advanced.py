@@ -58,20 +58,26 @@ def _entity(zid: Any, eid: Any) -> tuple[str, int]:
 
 class RecoveringSubscription:
     """An advanced subscriber on `key` (e.g. fusion/NS/meas/*) handing every sample, live or
-    recovered, to `callback`; `missed()` says how many samples zenoh reported lost for good, by
-    the key id (last segment) of the publisher that sent them."""
+    recovered, to `handler`: a callback, or a Zenoh channel read through `handler` (the
+    service's: fusion.io.arrivals); `missed()` says how many samples zenoh reported lost for
+    good, by the key id (last segment) of the publisher that sent them."""
 
-    def __init__(self, session: Any, key: str, callback: Callable[[Any], None]) -> None:
+    def __init__(self, session: Any, key: str, handler: Callable[[Any], None] | Any) -> None:
         import zenoh.ext as zx
 
         self._lock = threading.Lock()
         self._key_of: dict[tuple[str, int], str] = {}  # publisher (zid, eid) -> its key id
         self._missed: dict[str, int] = {}
         self._sub = zx.declare_advanced_subscriber(
-            session, key, callback, history=zx.HistoryConfig(detect_late_publishers=True),
+            session, key, handler, history=zx.HistoryConfig(detect_late_publishers=True),
             recovery=zx.RecoveryConfig(heartbeat=True), subscriber_detection=True)
         self._publishers = self._sub.detect_publishers(self._on_publisher, history=True)
         self._listener = self._sub.sample_miss_listener(self._on_miss)
+
+    @property
+    def handler(self) -> Any:
+        """The channel's receiving end, when a channel was given (None for a callback)."""
+        return self._sub.handler
 
     def _on_publisher(self, sample: Any) -> None:
         """A publisher's liveliness token `<key>/@adv/pub/<zid>/<eid>/...`."""
