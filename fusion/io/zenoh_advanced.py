@@ -10,8 +10,9 @@ token `<key>/@adv/pub/<zid>/<eid>/...`) and sends a heartbeat with its last numb
     the heartbeat when the lost one was the last) makes it query that publisher's cache;
   - counts what could not be recovered (the cache had moved on): zenoh's sample-miss listener
     reports (publisher, number missed), mapped to the key id (sensor) the publisher announced.
-Samples recovered go to the same callback as live ones. Callbacks run on zenoh's threads and
-only count under a lock (the miss counts are read from the service's loop).
+Samples recovered go to the same handler (a callback, or the service's channel) as live ones.
+The publisher and miss callbacks run on zenoh's threads and only count under a lock (the miss
+counts are read from the service's loop).
 """
 
 from __future__ import annotations

@@ -144,7 +144,8 @@ def _added_pairs(ts: TrackSet, changed: np.ndarray, new: np.ndarray, points: tup
     return np.concatenate(ids), np.concatenate(sq)
 
 
-_COUNTED_CODES = (OUTCOME_CODE[Outcome.UPDATED], OUTCOME_CODE[Outcome.BORN])  # association_kernels.counted's
+_COUNTED_CODES = (OUTCOME_CODE[Outcome.UPDATED], OUTCOME_CODE[Outcome.BORN])
+_NO_SIGNATURES = np.empty(0, dtype=np.int64)  # association_kernels.counted's
 
 
 def _tally_of(assoc: ScanAssociations, rows: np.ndarray, events: list) -> Counter:
@@ -188,7 +189,8 @@ def rerun(ts: TrackSet, key: ScanKey, dets: tuple[Detection, ...], ctx: ScanCont
         if not np.array_equal(ts.ids, old.before.ids):
             return None  # the same rows in another order: the whole scan orders its output by them
         kept = {int(i) for i in ts.ids.tolist()} | {int(i) for i in old.after.ids.tolist()}
-        return Partial(ScanOutcome(old.after, [], [], old.associations, old.tally, old_gates.mpos), kept,
+        return Partial(ScanOutcome(old.after, [], [], old.associations, old.tally, old_gates.mpos,
+                                   signatures=_NO_SIGNATURES), kept,
                        old_gates, Hint(old.after, np.zeros(0, np.int64)), 0, 0)
     points = _points(old, old_gates, dets, seqs, old_j, ctx, key[1])
     add_ids, add_seqs = _added_pairs(ts, changed, new, points, seqs, key[0], ctx)
@@ -221,10 +223,10 @@ def rerun(ts: TrackSet, key: ScanKey, dets: tuple[Detection, ...], ctx: ScanCont
     kept = set(ts.ids.tolist()).union(kept_births.tolist()).difference(touched.tolist())
     # the stored tally less what the re-run part counted in the stored run, plus what it counts now
     tally = old.tally - _tally_of(old.associations, gone_k, [ev for ev in old_events if ev.track_id not in kept])
-    assoc, estimates, events = old.associations, [], []
+    assoc, estimates, events, sigs = old.associations, [], [], _NO_SIGNATURES
     if sub is not None:
         tally.update(sub.tally)
         assoc = spliced(old.associations, old_j, len(dets), sub.associations, js)
-        estimates, events = sub.estimates, sub.events
-    return Partial(ScanOutcome(after, estimates, events, assoc, tally, new_gates.mpos), kept, new_gates,
-                   Hint(old.after, touched), int(rows.size), int(js.size))
+        estimates, events, sigs = sub.estimates, sub.events, sub.signatures
+    return Partial(ScanOutcome(after, estimates, events, assoc, tally, new_gates.mpos, signatures=sigs), kept,
+                   new_gates, Hint(old.after, touched), int(rows.size), int(js.size))

@@ -70,3 +70,35 @@ def revised(old: np.ndarray, new: np.ndarray, kept: np.ndarray
             b += 1
         w += 1
     return same, rev, gone[:, :g], table
+
+
+_MIX1, _MIX2, _SEED = np.uint64(0xBF58476D1CE4E5B9), np.uint64(0x94D049BB133111EB), np.uint64(0x9E3779B97F4A7C15)
+
+
+@njit(cache=True, fastmath=False, inline="always")
+def _mix(h: np.uint64) -> np.uint64:
+    """splitmix64's finaliser: a bijection of 64-bit words that spreads every bit over all."""
+    h = (h ^ (h >> np.uint64(30))) * _MIX1
+    h = (h ^ (h >> np.uint64(27))) * _MIX2
+    return h ^ (h >> np.uint64(31))
+
+
+@njit(cache=True, fastmath=False)
+def signatures(X: np.ndarray, P: np.ndarray, status: np.ndarray) -> np.ndarray:
+    """A 64-bit signature of each row's bits: X (k, n) and P (k, n, n) float64, C-contiguous,
+    viewed as 64-bit words, then status (k,): h <- mix(h ^ word) over the words in that order,
+    from a fixed seed. mix is a bijection, so two rows that differ in one word never share a
+    signature; rows that differ in more share one with probability ~2^-64 (what revise accepts:
+    history.signatures_of). -0.0 and 0.0 differ, a NaN equals itself bit for bit, as bytes do."""
+    k = X.shape[0]
+    xw = X.reshape(k, -1).view(np.uint64)
+    pw = P.reshape(k, -1).view(np.uint64)
+    out = np.empty(k, dtype=np.uint64)
+    for i in range(k):
+        h = _SEED
+        for j in range(xw.shape[1]):
+            h = _mix(h ^ xw[i, j])
+        for j in range(pw.shape[1]):
+            h = _mix(h ^ pw[i, j])
+        out[i] = _mix(h ^ np.uint64(status[i]))
+    return out.view(np.int64)

@@ -41,6 +41,7 @@ from fusion.tracking.results import (
     ScanKey,
     TrackEvent,
 )
+from fusion.tracking.revision_kernel import signatures
 from fusion.tracking.trackset import ROW_FIELDS, Layout, Rows, Status, TrackSet, track_id_for
 
 _LABELS = {int(s): s.label for s in Status}
@@ -85,6 +86,7 @@ class ScanOutcome:
     positions: Array  # (M, d) world points of the scan's measurements, in the order of its detections
     variances: Array | None = None  # (M, d) their per-axis variances (the coarse gate's)
     coarse: tuple[np.ndarray, np.ndarray] | None = None  # the coarse pairs (track rows, detection indices)
+    signatures: np.ndarray | None = None  # (len(estimates),) int64: each estimate's (history.revise), in order
 
 
 @dataclass(frozen=True)
@@ -155,6 +157,9 @@ def run_scan(ts: TrackSet, key: ScanKey, dets: tuple[Detection, ...], ctx: ScanC
                                   Status(int(born.status[b])).label, 0, None,
                                   None if born.MU is None else born.MU[b], born_review, b))
     tally[Tally.BIRTHS] += born.ids.size
+    sigs = row_signatures(taken.X, taken.P, status)
+    if born.ids.size:
+        sigs = np.concatenate([sigs, row_signatures(born.X, born.P, born.status)])
 
     updated = ts.derive(update=(ti, changes))
     hit = np.zeros(len(ts), dtype=bool)
@@ -166,11 +171,19 @@ def run_scan(ts: TrackSet, key: ScanKey, dets: tuple[Detection, ...], ctx: ScanC
     events.extend(sweep.events)
     after = updated.derive(counters=sweep.counters, delete=sweep.delete, born=born)
     if born.ids.size:  # track ids are unique: sorted by id (stably, as sorted() would)
-        order = np.argsort(np.concatenate([updated_ids, born.ids]), kind="stable").tolist()
-        estimates = [estimates[k] for k in order]
+        order = np.argsort(np.concatenate([updated_ids, born.ids]), kind="stable")
+        estimates, sigs = [estimates[k] for k in order.tolist()], sigs[order]
     elif ti.size > 1 and not (np.diff(updated_ids) > 0).all():
-        estimates = [estimates[k] for k in np.argsort(updated_ids, kind="stable").tolist()]
-    return ScanOutcome(after, estimates, events, assoc, tally, mpos, mvar, (ci, cj))
+        order = np.argsort(updated_ids, kind="stable")
+        estimates, sigs = [estimates[k] for k in order.tolist()], sigs[order]
+    return ScanOutcome(after, estimates, events, assoc, tally, mpos, mvar, (ci, cj), sigs)
+
+
+def row_signatures(X: Array, P: Array, status: np.ndarray) -> np.ndarray:
+    """The signature (fusion.tracking.revision_kernel.signatures) of each row's x, P and status:
+    what history.revise compares, computed from the scan's blocks (its estimates are their rows)."""
+    return signatures(np.ascontiguousarray(X, dtype=np.float64), np.ascontiguousarray(P, dtype=np.float64),
+                      status.astype(np.int64))
 
 
 def _births_and_associations(ts: TrackSet, key: ScanKey, dets: tuple[Detection, ...], det_seqs: np.ndarray,

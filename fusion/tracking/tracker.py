@@ -196,7 +196,7 @@ class Tracker:
                 points.append(_new_points(key, dets, arrived, prev is not None, out.positions,
                                           None if gates is None else gates.det_seqs))
             entry = Entry(key, dets, ts, tally=out.tally, associations=out.associations, gates=gates)
-            estimates.extend(revise(entry, prev, out.estimates, kept))
+            estimates.extend(revise(entry, prev, out.estimates, kept, out.signatures))
             events.extend(revise_events(entry, prev, out.events, kept))
             assoc.append(out.associations)
             self.history.append(entry)

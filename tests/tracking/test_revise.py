@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from fusion.tracking.history import Entry, _signature, revise
+from fusion.tracking.history import Entry, revise, signatures_of
 from fusion.tracking.results import Estimate
 
 KEY = (5_000, "radar1")
@@ -19,7 +19,7 @@ def _reference(emitted: dict, old: dict, new: list[Estimate], kept: set[int]) ->
     out: list[Estimate] = []
     produced: set[int] = set()
     for e in new:
-        sig = _signature(e)
+        sig = int(signatures_of([e])[0])
         produced.add(e.track_id)
         o = old.get(e.track_id)
         if o is not None and o[2] and o[1] == sig:
@@ -82,3 +82,53 @@ def test_first_run_reports_everything_at_revision_zero() -> None:
     assert entry.emitted.table[0].tolist() == [1, 3] and 2 not in entry.emitted
     with pytest.raises(KeyError):
         entry.emitted[2]
+
+
+def test_a_signature_changes_with_any_word_of_x_p_or_the_status() -> None:
+    """signatures_of: the same bits, the same signature; one ulp in any component of x or P, the
+    sign of a zero, or the status, another (mix is a bijection: one word never collides)."""
+    rng = np.random.default_rng(3)
+    base = Estimate(7, KEY[0], KEY[1], 1, rng.normal(size=4), rng.normal(size=(4, 4)), "confirmed", 0, 0.5)
+    sig = int(signatures_of([base])[0])
+    copy = Estimate(7, KEY[0], KEY[1], 1, base.x.copy(), base.P.copy(), "confirmed", 3, 9.0)  # revision, nis: unsigned
+    assert int(signatures_of([copy])[0]) == sig
+    seen = {sig}
+    for field, shape in (("x", (4,)), ("P", (4, 4))):
+        for idx in np.ndindex(*shape):
+            x, P = base.x.copy(), base.P.copy()
+            a = x if field == "x" else P
+            a[idx] = np.nextafter(a[idx], np.inf)
+            seen.add(int(signatures_of([Estimate(7, KEY[0], KEY[1], 1, x, P, "confirmed", 0, 0.5)])[0]))
+    assert len(seen) == 1 + 4 + 16
+    tentative = Estimate(7, KEY[0], KEY[1], 1, base.x, base.P, "tentative", 0, 0.5)
+    assert int(signatures_of([tentative])[0]) != sig
+    zero = np.zeros(4)
+    assert signatures_of([Estimate(1, 0, "s", 0, zero, np.eye(4), "confirmed", 0, None)])[0] != \
+        signatures_of([Estimate(1, 0, "s", 0, -zero, np.eye(4), "confirmed", 0, None)])[0]
+    nan = np.full(4, np.nan)
+    assert signatures_of([Estimate(1, 0, "s", 0, nan, np.eye(4), "confirmed", 0, None)])[0] == \
+        signatures_of([Estimate(1, 0, "s", 0, nan.copy(), np.eye(4), "confirmed", 0, None)])[0]
+
+
+def test_a_scan_s_signatures_are_those_of_its_estimates() -> None:
+    """run_scan signs its estimates from its blocks (scan.row_signatures), in the order of the
+    estimates it returns (births among them, sorted by id): the same as signing the estimates."""
+    from bench.late_data import scans, shipped_config
+    from fusion.tracking.scan import run_scan
+    from fusion.tracking.tracker import Tracker
+
+    data = scans(30, 3.0)
+    tr = Tracker(shipped_config())
+    checked = 0
+    for s in data:
+        ts = tr.track_set
+        key = (s[0].t_ns, s[0].sensor_id)
+        tr.process(s)
+        entry = tr.history.entries[-1]
+        if entry.key != key:
+            continue
+        out = run_scan(ts, key, entry.dets, tr.ctx)
+        assert out.signatures is not None and len(out.signatures) == len(out.estimates)
+        assert out.signatures.tolist() == signatures_of(out.estimates).tolist()
+        checked += len(out.estimates)
+    assert checked > 500
