@@ -81,7 +81,7 @@ def _of_record(entity: str) -> bool:
     return entity.startswith("record/")
 
 
-TRUTH_WAIT_NS = 2_000_000_000
+TRUTH_WAIT_NS = 2_000_000_000  # how long (arrival time) an estimate waits for its time's truth: RerunSink._flush
 # The views are written every 15 s: Rerun costs ~0.1-0.5 ms per entity written and the views are
 # ~130 entities (6 tracks' series, counts, trails); every 5 s that was ~10 ms per second of CPU,
 # ~10 us per measurement at 1000 measurements/s. The record is written every write_interval_s.
@@ -149,6 +149,7 @@ class RerunSink:
         self._pause: Callable[[], None] = pause if pause is not None else _no_pause
         self._counts_written: list[tuple[str, int]] = []  # the counts of the last counts rows
         self._newest_t = 0
+        self._newest_arr = -(2**63)  # the newest arrival (or sensor time) of the estimates logged
         self._horizon_ns: int | None = None  # the newest StepResult.horizon_ns: rows before it are final
         self._closed = False
         # the names of an IMM's modes for their probability series (meta "modes"; else "mode j")
@@ -260,7 +261,9 @@ class RerunSink:
         for E, step, arrival_ns in self._est_steps:
             kept_E.extend(E)
             kept_step.extend([step] * len(E))
-            kept_arr.extend([e.t_ns for e in E] if arrival_ns is None else [arrival_ns] * len(E))
+            arr = [e.t_ns for e in E] if arrival_ns is None else [arrival_ns] * len(E)
+            kept_arr.extend(arr)
+            self._newest_arr = max(self._newest_arr, max(arr) if arrival_ns is None else arrival_ns)
         self._est_steps = []
         steps, self._steps = self._steps, []
         if not steps:
@@ -289,11 +292,15 @@ class RerunSink:
 
     def _flush(self, *, views: bool, final: bool, ends: bool = False) -> None:
         """Write the record's rows, and the views' rows too when `views` (with the viewed tracks'
-        end markers when `ends`). Unless `final`, estimates at or after the newest truth time (by at
-        most TRUTH_WAIT_NS) wait for the next flush: truth arrives in time order, but may come just
-        after the measurements of the same time, and the truth of a time is complete only once a
-        later time's has come (scoring against part of it would match another target, and what is
-        scored would depend on when the flush fell).
+        end markers when `ends`). Unless `final`, estimates at or after the newest truth time wait
+        for the next flush, for at most TRUTH_WAIT_NS of arrival time (sensor time where arrivals
+        are unknown) after the newest arrival: truth arrives in time order, but may come after the
+        measurements of the same time, and the truth of a time is complete only once a later
+        time's has come (scoring against part of it would match another target, and what is
+        scored would depend on when the flush fell). The bound is on arrival time, not on how far
+        the estimates' sensor time runs ahead of the truth's: a simulation sent faster than real
+        time (`fusion demo --speed max`) brings seconds of sensor time in a fraction of a second,
+        and its truth, over another link, could fall that far behind its measurements.
 
         The record (record/*: what `fusion inspect` scores) is scored and written at every call;
         the rows of everything else (measured points, events as text, trails, truth, OSPA/GOSPA,
@@ -310,7 +317,7 @@ class RerunSink:
             self._newest_t = max(self._newest_t, int(t_est.max()))
         newest = self.rows.newest_truth_ns
         if not final and newest is not None and len(E):
-            wait = (t_est >= newest) & (t_est <= newest + TRUTH_WAIT_NS)
+            wait = (t_est >= newest) & (arr_e >= self._newest_arr - TRUTH_WAIT_NS)
             if wait.any():
                 w = wait.tolist()
                 self._est = ([e for e, k in zip(E, w, strict=True) if k], arr_e[wait].tolist(), stp_e[wait].tolist())

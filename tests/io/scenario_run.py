@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -50,7 +51,8 @@ def record_scenario(name: str, path, *, duration_s: float | None = None, batch: 
                     shuffle_seed: int | None = None, flush_rows: int = 200_000, flush_interval_s: float = 0.5,
                     write_interval_s: float | None = None, write_rows: int | None = None,
                     view_interval_s: float | None = None, view_rows_max: int | None = None,
-                    view_slice: int | None = None, background: bool = False, late: tuple[int, float] | None = None):
+                    view_slice: int | None = None, background: bool = False, late: tuple[int, float] | None = None,
+                    reorder: Callable[[list], list] | None = None):
     """The reference scenario `name` (configs/scenarios/<name>.toml) as the service runs it: its
     stream of samples (measurements and truth) through the Pipeline with a RerunSink writing
     `path` (flushed and written as the arguments say; view_interval_s, view_rows_max None: the sink's defaults), `batch`
@@ -58,8 +60,9 @@ def record_scenario(name: str, path, *, duration_s: float | None = None, batch: 
     samples come in a seeded random order (more late arrivals; truth keeps its places); with
     `background`, the sink behind the service's recording thread (fusion.io.sink_thread, the loop's
     counts taken before every call); with `late` = (n, s), every n-th measurement comes after the
-    samples of the next s seconds of sensor time (a replay from far back in the window). Returns
-    the pipeline (its tracker and counts) after the sink is closed."""
+    samples of the next s seconds of sensor time (a replay from far back in the window); `reorder`:
+    any other change of the records (arrival_ns, key, payload), made last. Returns the pipeline
+    (its tracker and counts) after the sink is closed."""
     import msgspec
 
     from fusion.io import wire
@@ -101,6 +104,8 @@ def record_scenario(name: str, path, *, duration_s: float | None = None, batch: 
         records = [records[j] for j in order]
     if late is not None:
         records = _delayed(records, every=late[0], late_ns=round(late[1] * 1e9))
+    if reorder is not None:
+        records = reorder(records)
     try:
         for i in range(0, len(records), batch):
             pipe.ingest(records[i:i + batch])
@@ -112,15 +117,20 @@ def record_scenario(name: str, path, *, duration_s: float | None = None, batch: 
 
 def _delayed(records: list, *, every: int, late_ns: int) -> list:
     """Every `every`-th measurement moved after the samples up to `late_ns` of sensor time later."""
+    held = [i for i, (_, k, _) in enumerate(records) if "/truth/" not in k][::every]
+    return moved_later(records, {i: late_ns for i in held})
+
+
+def moved_later(records: list, late_ns: dict[int, int]) -> list:
+    """The records `i` of `late_ns` moved after the samples up to late_ns[i] of sensor time after
+    their own (in their order of due time), the others in place."""
     from fusion import messages as m
 
     t_of = [m.decode_truth(p).t_ns if "/truth/" in k else m.decode_measurement(p).t_ns for _, k, p in records]
-    held = [i for i, (_, k, _) in enumerate(records) if "/truth/" not in k][::every]
-    due = sorted((t_of[i] + late_ns, i) for i in held)
-    skip = set(held)
+    due = sorted((t_of[i] + d, i) for i, d in late_ns.items())
     out = []
     for i, r in enumerate(records):
-        if i in skip:
+        if i in late_ns:
             continue
         while due and due[0][0] < t_of[i]:
             out.append(records[due.pop(0)[1]])
