@@ -13,7 +13,7 @@ took the samples itself was ~7 % faster still, but a busy loop would then leave 
 Zenoh, outside the intake queue's bounds and counts: not done.
 
 A full channel makes Zenoh wait, as a slow callback did. An exception from `take` (a bug) is
-logged and kept in `errors`, and the thread goes on, as Zenoh does with a callback's. When its
+logged and kept in `errors` (the last 100), and the thread goes on, as Zenoh does with a callback's. When its
 subscriber is undeclared a channel closes: its thread takes what is left in it, then ends
 (`join`).
 """
@@ -23,6 +23,7 @@ from __future__ import annotations
 import logging
 import threading
 import time
+from collections import deque
 from collections.abc import Callable, Sequence
 from typing import Any
 
@@ -39,7 +40,7 @@ class ChannelIntake:
                  name: str = "fusion-intake") -> None:
         self._take = take
         self._chunk = chunk
-        self.errors: list[Exception] = []  # what `take` raised (a bug; logged, the thread goes on)
+        self.errors: deque[Exception] = deque(maxlen=100)  # the last of what `take` raised (a bug; logged)
         self._threads = [threading.Thread(target=self._run, args=(h,), name=f"{name}-{i}", daemon=True)
                          for i, h in enumerate(handlers)]
         for t in self._threads:

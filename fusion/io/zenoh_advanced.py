@@ -60,7 +60,7 @@ def _entity(zid: Any, eid: Any) -> tuple[str, int]:
 class RecoveringSubscription:
     """An advanced subscriber on `key` (e.g. fusion/NS/meas/*) handing every sample, live or
     recovered, to `handler`: a callback, or a Zenoh channel read through `handler` (the
-    service's: fusion.io.arrivals); `missed()` says how many samples zenoh reported lost for
+    service's: fusion.io.channel_intake); `missed()` says how many samples zenoh reported lost for
     good, by the key id (last segment) of the publisher that sent them."""
 
     def __init__(self, session: Any, key: str, handler: Callable[[Any], None] | Any) -> None:

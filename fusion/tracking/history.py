@@ -25,7 +25,7 @@ import numpy as np
 from fusion.tracking.detection import Detection
 from fusion.tracking.replay import Gates
 from fusion.tracking.results import Estimate, ScanAssociations, ScanKey, TrackEvent
-from fusion.tracking.revision_kernel import ALIVE, IDS, REV, SIG, revised, signatures
+from fusion.tracking.revision_kernel import ALIVE, IDS, REV, SIG, revised, row_signatures
 from fusion.tracking.trackset import Status, TrackSet
 
 Revision = tuple[int, int, bool]  # (revision, signature, alive)
@@ -143,17 +143,16 @@ _STATUS_CODE = {s.label: int(s) for s in Status}  # an estimate's status label -
 
 
 def signatures_of(estimates: list[Estimate]) -> np.ndarray:
-    """The signature of each estimate's x, P and status (fusion.tracking.revision_kernel.signatures,
-    as scan.row_signatures computes it from a scan's blocks): what decides whether a run again
+    """The signature of each estimate's x, P and status (fusion.tracking.revision_kernel.row_signatures,
+    as a scan computes it from its blocks): what decides whether a run again
     changed it. Kept for every estimate of the window (an int instead of the ~250 bytes
     themselves); compared only with the signature of the same track's estimate of the same scan
     in the same process (never stored in a checkpoint), so a changed estimate is taken for
     unchanged with probability ~2^-64 per comparison."""
     if not estimates:
         return _NO_IDS
-    return signatures(np.ascontiguousarray(np.stack([e.x for e in estimates]), dtype=np.float64),
-                      np.ascontiguousarray(np.stack([e.P for e in estimates]), dtype=np.float64),
-                      np.array([_STATUS_CODE[e.status] for e in estimates], dtype=np.int64))
+    return row_signatures(np.stack([e.x for e in estimates]), np.stack([e.P for e in estimates]),
+                          np.array([_STATUS_CODE[e.status] for e in estimates]))
 
 
 def revise(entry: Entry, prev: Entry | None, new: list[Estimate], kept: AbstractSet[int] = frozenset(),

@@ -144,8 +144,8 @@ def _added_pairs(ts: TrackSet, changed: np.ndarray, new: np.ndarray, points: tup
     return np.concatenate(ids), np.concatenate(sq)
 
 
-_COUNTED_CODES = (OUTCOME_CODE[Outcome.UPDATED], OUTCOME_CODE[Outcome.BORN])
-_NO_SIGNATURES = np.empty(0, dtype=np.int64)  # association_kernels.counted's
+_COUNTED_CODES = (OUTCOME_CODE[Outcome.UPDATED], OUTCOME_CODE[Outcome.BORN])  # association_kernels.counted's
+_NO_SIGNATURES = np.empty(0, dtype=np.int64)
 
 
 def _tally_of(assoc: ScanAssociations, rows: np.ndarray, events: list) -> Counter:

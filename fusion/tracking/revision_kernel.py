@@ -102,3 +102,11 @@ def signatures(X: np.ndarray, P: np.ndarray, status: np.ndarray) -> np.ndarray:
             h = _mix(h ^ pw[i, j])
         out[i] = _mix(h ^ np.uint64(status[i]))
     return out.view(np.int64)
+
+
+def row_signatures(X: np.ndarray, P: np.ndarray, status: np.ndarray) -> np.ndarray:
+    """signatures of rows x (k, n), P (k, n, n) and status codes (k,) in any dtype and layout:
+    what history.revise compares, from a scan's blocks (fusion.tracking.scan: its estimates are
+    their rows) or from estimates stacked (history.signatures_of)."""
+    return signatures(np.ascontiguousarray(X, dtype=np.float64), np.ascontiguousarray(P, dtype=np.float64),
+                      np.asarray(status).astype(np.int64))

@@ -41,7 +41,7 @@ from fusion.tracking.results import (
     ScanKey,
     TrackEvent,
 )
-from fusion.tracking.revision_kernel import signatures
+from fusion.tracking.revision_kernel import row_signatures
 from fusion.tracking.trackset import ROW_FIELDS, Layout, Rows, Status, TrackSet, track_id_for
 
 _LABELS = {int(s): s.label for s in Status}
@@ -177,13 +177,6 @@ def run_scan(ts: TrackSet, key: ScanKey, dets: tuple[Detection, ...], ctx: ScanC
         order = np.argsort(updated_ids, kind="stable")
         estimates, sigs = [estimates[k] for k in order.tolist()], sigs[order]
     return ScanOutcome(after, estimates, events, assoc, tally, mpos, mvar, (ci, cj), sigs)
-
-
-def row_signatures(X: Array, P: Array, status: np.ndarray) -> np.ndarray:
-    """The signature (fusion.tracking.revision_kernel.signatures) of each row's x, P and status:
-    what history.revise compares, computed from the scan's blocks (its estimates are their rows)."""
-    return signatures(np.ascontiguousarray(X, dtype=np.float64), np.ascontiguousarray(P, dtype=np.float64),
-                      status.astype(np.int64))
 
 
 def _births_and_associations(ts: TrackSet, key: ScanKey, dets: tuple[Detection, ...], det_seqs: np.ndarray,

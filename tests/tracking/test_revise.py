@@ -111,7 +111,7 @@ def test_a_signature_changes_with_any_word_of_x_p_or_the_status() -> None:
 
 
 def test_a_scan_s_signatures_are_those_of_its_estimates() -> None:
-    """run_scan signs its estimates from its blocks (scan.row_signatures), in the order of the
+    """run_scan signs its estimates from its blocks (revision_kernel.row_signatures), in the order of the
     estimates it returns (births among them, sorted by id): the same as signing the estimates."""
     from bench.late_data import scans, shipped_config
     from fusion.tracking.scan import run_scan
