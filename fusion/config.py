@@ -319,7 +319,9 @@ class RecordingConfig(Section):
     the service runs (disk full, folder gone) stops; tracking and publishing go on, and the
     status says why (fusion.io.recording_guard, fusion.io.stream_rotation).
     `flush_interval_s`: the record is scored every 0.2 s, in small pieces: a flush of 0.5 s of rows
-    at 10k measurements/s took ~20-50 ms (BENCHMARKS.md). `write_interval_s`: the scored rows go to
+    at 10k measurements/s took ~20-50 ms (BENCHMARKS.md); but only once `flush_min_rows` rows wait
+    (~2.7 rows a measurement), else at the next write: a flush costs ~0.8 ms whatever it holds, and
+    at a few hundred measurements/s 0.2 s holds too few to pay for it. `write_interval_s`: the scored rows go to
     the file every 1 s (or once an entity holds 4 096 rows), in fewer, larger chunks: Rerun keeps a
     row of the file's footer index per chunk in memory until the file closes (fusion.io.allocator).
     `background`: the recording is written on a thread of its own that works while the loop waits
@@ -335,6 +337,7 @@ class RecordingConfig(Section):
     rotate_s: Annotated[float, msgspec.Meta(gt=0.0)] = 3600.0
     flush_interval_s: Annotated[float, msgspec.Meta(gt=0.0, le=60.0)] = 0.2
     write_interval_s: Annotated[float, msgspec.Meta(gt=0.0, le=60.0)] = 1.0
+    flush_min_rows: Annotated[int, msgspec.Meta(ge=0)] = 1000
     background: bool = True
     stream: bool = True
     keep_files: Annotated[int, msgspec.Meta(ge=0)] = 0

@@ -86,7 +86,7 @@ def open_outputs(rc: RecordingConfig, *, namespace: str, recording_dir: str | Pa
     sink: RotatingSink | RerunSink | None = None
     if recording_path is not None:
         sink = RerunSink(recording_path, recording_id=Path(recording_path).stem, flush_interval_s=rc.flush_interval_s,
-                         write_interval_s=rc.write_interval_s, **common)
+                         write_interval_s=rc.write_interval_s, flush_min_rows=rc.flush_min_rows, **common)
     elif rc.enabled:
         sink = service_recording(rc, rdir, **common)
     try:

@@ -25,14 +25,15 @@ class RotatingSink:
     def __init__(
         self, directory: str | Path, *, prefix: str, layout: tuple[str, ...], position_indices: tuple[int, ...],
         velocity_indices: tuple[int, ...], rotate_bytes: int, rotate_s: float, flush_interval_s: float = 0.2,
-        write_interval_s: float | None = None,
+        write_interval_s: float | None = None, flush_min_rows: int = 0,
         meta: Mapping[str, Any] | None = None, counts: Callable[[], Mapping[str, int]] | None = None,
         clock: Callable[[], float] = time.time, pause: Callable[[], None] | None = None,
     ) -> None:
         self.directory = Path(directory)
         self.prefix = prefix
         self._kw = dict(layout=layout, position_indices=position_indices, velocity_indices=velocity_indices,
-                        flush_interval_s=flush_interval_s, write_interval_s=write_interval_s, meta=meta, counts=counts,
+                        flush_interval_s=flush_interval_s, write_interval_s=write_interval_s,
+                        flush_min_rows=flush_min_rows, meta=meta, counts=counts,
                         pause=pause, run_id=uuid.uuid4().hex)  # one run: every file of the set carries its id
         self.rotate_bytes = rotate_bytes
         self.rotate_s = rotate_s
@@ -107,4 +108,5 @@ def service_recording(rc: RecordingConfig, directory: str | Path, *, layout: tup
     return RotatingSink(directory, prefix=rc.prefix, layout=layout, position_indices=position_indices,
                         velocity_indices=velocity_indices, rotate_bytes=int(rc.rotate_mb * 1e6),
                         rotate_s=rc.rotate_s, flush_interval_s=rc.flush_interval_s,
-                        write_interval_s=rc.write_interval_s, meta=meta, counts=counts, pause=pause)
+                        write_interval_s=rc.write_interval_s, flush_min_rows=rc.flush_min_rows, meta=meta,
+                        counts=counts, pause=pause)

@@ -110,7 +110,7 @@ class RerunSink:
         self, path: str | Path, *, layout: tuple[str, ...], position_indices: tuple[int, ...],
         velocity_indices: tuple[int, ...], recording_id: str = "fusion", application_id: str = "fusion",
         flush_rows: int = 200_000, flush_interval_s: float = 0.2, write_interval_s: float | None = None,
-        write_rows: int = WRITE_ROWS,
+        write_rows: int = WRITE_ROWS, flush_min_rows: int = 0,
         view_interval_s: float = VIEW_INTERVAL_S,
         view_rows_max: int = VIEW_ROWS_MAX, view_slice: int = VIEW_SLICE,
         meta: Mapping[str, Any] | None = None, counts: Callable[[], Mapping[str, int]] | None = None,
@@ -134,6 +134,7 @@ class RerunSink:
         self._scored: list[Any] = []  # the viewed tracks' rows (fusion.io.view_rows.Stacked) since the last view flush
         self._pending = 0
         self._flush_rows = flush_rows
+        self._flush_min_rows = flush_min_rows
         self._interval = flush_interval_s
         self._write_interval = flush_interval_s if write_interval_s is None else write_interval_s
         self._write_rows = write_rows
@@ -273,10 +274,16 @@ class RerunSink:
 
     # ---- writing ---------------------------------------------------------------------------------
     def maybe_flush(self) -> None:
-        """The record on its cadence (every flush_interval_s or flush_rows pending rows), the views
-        on theirs (view_interval_s)."""
+        """The record on its cadence, the views on theirs (view_interval_s). The record is scored
+        once flush_rows rows wait; every flush_interval_s once flush_min_rows wait; and every
+        write_interval_s whatever waits (its rows are scored before they are written). A flush
+        has a fixed cost (~0.8 ms at 10 targets: the counts, the scoring's and the writing's
+        calls, whatever the rows), which a few rows every flush_interval_s would pay again and
+        again: at 10 targets in real time (150 measurements/s) 0.2 s holds ~30 measurements."""
         now = time.monotonic()
-        if self._pending >= self._flush_rows or now - self._last_flush >= self._interval:
+        since = now - self._last_flush
+        if (self._pending >= self._flush_rows or since >= self._write_interval
+                or (since >= self._interval and self._pending >= self._flush_min_rows)):
             self._flush(views=now - self._last_view_flush >= self._view_interval, final=False)
         elif self._waiting:
             self._send({k: self._waiting.pop(k) for k in sorted(self._waiting)[:self._view_slice]})
