@@ -337,7 +337,7 @@ class RecordingConfig(Section):
     rotate_s: Annotated[float, msgspec.Meta(gt=0.0)] = 3600.0
     flush_interval_s: Annotated[float, msgspec.Meta(gt=0.0, le=60.0)] = 0.2
     write_interval_s: Annotated[float, msgspec.Meta(gt=0.0, le=60.0)] = 1.0
-    flush_min_rows: Annotated[int, msgspec.Meta(ge=0)] = 1000
+    flush_min_rows: Annotated[int, msgspec.Meta(ge=0)] = 4000
     background: bool = True
     stream: bool = True
     keep_files: Annotated[int, msgspec.Meta(ge=0)] = 0
