@@ -279,8 +279,9 @@ class RerunSink:
         write_interval_s whatever waits (its rows are scored before they are written). A flush
         has a fixed cost (~0.8 ms at 10 targets: the counts, the scoring's and the writing's
         calls, whatever the rows), which a few rows every flush_interval_s would pay again and
-        again: at 10 targets in real time (150 measurements/s) 0.2 s holds ~30 measurements (the
-        service's flush_min_rows: fusion.config.RecordingConfig; 0 here: every flush_interval_s)."""
+        again: at 10 targets in real time (150 measurements/s) 0.2 s holds ~30 measurements. The
+        default here, 0, scores every flush_interval_s; the service's is
+        fusion.config.RecordingConfig.flush_min_rows."""
         now = time.monotonic()
         since = now - self._last_flush
         if (self._pending >= self._flush_rows or since >= self._write_interval
