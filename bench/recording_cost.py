@@ -147,13 +147,18 @@ def timer_overhead_s(calls: int = 5000, blocks: int = 7) -> float:
     return min(means)
 
 
+def _measurements_so_far(data: list) -> np.ndarray:
+    """The measurements (samples not on a truth key) before each scan of `data`, and in all: (n_scans + 1,)."""
+    return np.cumsum([0] + [sum(1 for _, key, _ in recs if "/truth/" not in key) for recs in data])
+
+
 def _run(data: list, *, record: bool, tmp: Path, paced: bool = False) -> tuple[Any, int]:
     """Cumulative (wall s, process CPU s, CPU s inside the sink) after each scan, whether the
     recording's viewed tracks were all chosen by then (fusion.io.viewed: until then every
     confirmed track's rows are kept as a candidate's) and the record flushes so far (of the file's
-    sink), (n_scans + 2, 5), and the measurements
-    applied; the last row after a recording's final flush and close. `paced`: each scan waits
-    for its arrival time (from the first scan's, in wall time), as in a service in real time."""
+    sink), (n_scans + 2, 5), and the measurements applied; the last row after a recording's final
+    flush and close. `paced`: each scan waits for its arrival time (from the first scan's, in
+    wall time), as in a service in real time."""
     cfg = load_service_config(CONFIG)
     tr = Tracker(cfg.tracker)
     pipe = Pipeline(tr, wire.Codec(cfg.namespace))
@@ -226,7 +231,7 @@ def run(*, quick: bool = False, sizes: tuple[int, ...] = (10, 100, 1000)) -> dic
             for k in range(repeats):
                 for record in (False, True):
                     runs[record].append(_run(data, record=record, tmp=Path(d) / f"r{k}"))
-        meas = np.cumsum([0] + [sum(1 for _, key, _ in recs if "/truth/" not in key) for recs in data])
+        meas = _measurements_so_far(data)
         wall, cpu, ins, off_us, on_us, n_steady, steady, n_chosen, window, ends = [], [], [], [], [], [], [], [], [], []
         for (off, n_off), (on, n_on) in zip(runs[False], runs[True], strict=True):
             assert n_off == n_on == meas[-1], (n_off, n_on, meas[-1])  # every measurement applied, both ways
@@ -283,7 +288,7 @@ def real_time(sizes: tuple[int, ...], *, repeats: int, ns: str) -> dict[str, flo
     out: dict[str, float] = {}
     for n_targets in sizes:
         data = batches(n_targets, REAL_S, ns=ns)
-        meas = np.cumsum([0] + [sum(1 for _, key, _ in recs if "/truth/" not in key) for recs in data])
+        meas = _measurements_so_far(data)
         ins, ms_s, per_s, n_meas, closing = [], [], [], [], []
         with tempfile.TemporaryDirectory() as d:
             for k in range(repeats):
