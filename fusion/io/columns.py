@@ -2,9 +2,10 @@
 
 A `Column` holds the rows of one entity until the sink flushes: three times per row (sensor time
 `t`, tracker step `step`, arrival time `arrival`, integer ns) and the archetype's fields.
-`components` turns it into the archetype columns of one `send_columns` call. Rerun's cost is
-mostly per call (~100-400 us here, whatever the number of rows), so the sink keeps the number of
-entities per flush bounded and the rows per call many.
+fusion.io.arrow_columns turns it into the arrow columns of one `send_columns` call (with
+`field_arrow` and `record_block` here for a record's fields). Rerun's cost is mostly per call
+(~30-60 us here, whatever the number of rows), so the sink keeps the number of entities per flush
+bounded and the rows per call many.
 
 Rows arrive in chunks: `add` buffers one row (Python values), `extend` appends a block of rows
 whose fields are either sequences with one item per row or numpy arrays whose first axis is the
@@ -110,6 +111,11 @@ class Column:
             out.extend(p.tolist() if isinstance(p, np.ndarray) and p.ndim == 1 else list(p))
         return out
 
+    def names(self) -> list[str]:
+        """The fields of its rows (every row has the same), in the order first given."""
+        self._seal()
+        return list(self.chunks[0][3]) if self.chunks else []
+
     def has(self, name: str) -> bool:
         self._seal()
         return bool(self.chunks) and name in self.chunks[0][3]
@@ -157,76 +163,7 @@ def stack(rows: Sequence[Array], shape: tuple[int, ...] | None = None) -> Array:
 _F64 = np.dtype(np.float64)
 
 
-def time_column(rr: Any, name: str, t_ns: Sequence[int] | Array, *, epoch: bool) -> Any:
-    a = np.asarray(t_ns, dtype=np.int64)
-    if epoch:
-        return rr.TimeColumn(name, timestamp=a.astype("datetime64[ns]"))
-    return rr.TimeColumn(name, duration=a.astype("timedelta64[ns]"))
-
-
-def _points(rr: Any, c: Column) -> Any:
-    """Points3D rows: each row a (k, 3) block of positions, with per-point colours (and labels)."""
-    pos, lens = c.ragged("p", 3, np.float64)
-    if c.has("rgba"):
-        cols, _ = c.ragged("rgba", 4, np.uint8)
-    else:
-        cols = np.tile(np.array(c.style["rgba"], np.uint8), (len(pos), 1))
-    kw: dict[str, Any] = {"positions": pos, "colors": cols,
-                          "radii": np.full(len(pos), c.style.get("radius", -2.0), dtype=np.float32)}
-    if c.has("label"):
-        kw["labels"] = [lab for labs in c.field("label") for lab in labs]
-        kw["show_labels"] = np.full(len(pos), c.style.get("show_labels", True))
-    return rr.Points3D.columns(**kw).partition(lens)
-
-
-def _strips(rr: Any, c: Column) -> Any:
-    """LineStrips3D rows: each row one strip (k, 3) (an ellipse outline)."""
-    strips = c.field("s")
-    # one (n, k, 3) array when every strip has k points (rerun converts it without per-strip work):
-    # what field() gives when every chunk was one; else a list of strips, their shapes looked at
-    if isinstance(strips, np.ndarray):
-        arr: Any = np.asarray(strips, dtype=np.float32)  # no copy of float32 strips
-    elif len({np.shape(x) for x in strips}) == 1:
-        arr = np.asarray(strips, dtype=np.float32)
-    else:
-        arr = [np.asarray(x, np.float32) for x in strips]
-    n = len(arr)
-    return rr.LineStrips3D.columns(strips=arr, colors=np.tile(np.array(c.style["rgba"], np.uint8), (n, 1)),
-                                   radii=np.full(n, c.style.get("radius", -1.0), dtype=np.float32))
-
-
-def _ellipsoids(rr: Any, c: Column) -> Any:
-    n = len(c)
-    return rr.Ellipsoids3D.columns(
-        centers=np.asarray(c.field("c")), half_sizes=np.asarray(c.field("h")), quaternions=np.asarray(c.field("q")),
-        colors=np.tile(np.array(c.style["rgba"], np.uint8), (n, 1)),
-        line_radii=np.full(n, c.style.get("radius", -1.0), dtype=np.float32),
-    )
-
-
-def components(rr: Any, c: Column) -> Any:
-    """The archetype columns of a pending Column (its kind says which archetype)."""
-    n = len(c)
-    if c.kind == "scalars":  # every row the same number of values: one series per value
-        width = c.style["width"]
-        v = np.asarray(c.field("v"), dtype=np.float64).reshape(n, width)
-        return rr.Scalars.columns(scalars=v.ravel()).partition(np.full(n, width))
-    if c.kind == "points":
-        return _points(rr, c)
-    if c.kind == "strips":
-        return _strips(rr, c)
-    if c.kind == "ellipsoids":
-        return _ellipsoids(rr, c)
-    if c.kind == "text":
-        return rr.TextLog.columns(text=c.field("text"), level=c.field("level"))
-    if c.kind == "record":  # structured rows: one AnyValues component per field
-        fields = {k: _field(c.field(k)) for k in c.chunks[0][3]}
-        fields.update({k: _block(v) for k, v in c.blocks.items()})
-        return rr.AnyValues.columns(**fields)
-    raise AssertionError(f"unknown column kind {c.kind!r}")  # every kind is produced by the sink
-
-
-def _field(values: Array | list[Any]) -> Any:
+def field_arrow(values: Array | list[Any]) -> Any:
     """A record field as an arrow array: float vectors as lists of float64, the rest as given."""
     if isinstance(values, pa.Array):
         return values
@@ -241,7 +178,7 @@ def _field(values: Array | list[Any]) -> Any:
     return pa.array(values)
 
 
-def _block(blocks: list[Array]) -> Any:
+def record_block(blocks: list[Array]) -> Any:
     """(rows, width) blocks as one list<float64> array: a vector per row, no per-row work."""
     flat = np.concatenate(blocks)
     n, width = flat.shape

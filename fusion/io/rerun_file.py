@@ -16,7 +16,8 @@ from pathlib import Path
 from typing import Any
 
 from fusion.io import blueprint
-from fusion.io.columns import Column, components, time_column
+from fusion.io.arrow_columns import components, time_index
+from fusion.io.columns import Column
 from fusion.io.labels import is_epoch
 
 
@@ -47,7 +48,6 @@ class RerunFile:
             firsts = [c.first_times() for c in cols.values() if len(c)]
             self.epoch = bool(firsts) and is_epoch(min(f[0] for f in firsts))
             self.arrival_epoch = bool(firsts) and is_epoch(min(f[1] for f in firsts))
-        rr = self._rr
         n_written = len(self.written)
         for entity in sorted(cols):
             c = cols[entity]
@@ -56,10 +56,9 @@ class RerunFile:
             pause()
             self._style(entity, c)
             t_ns, step, arrival_ns = c.times()
-            idx = [time_column(rr, "t", t_ns, epoch=bool(self.epoch)),
-                   rr.TimeColumn("step", sequence=step),
-                   time_column(rr, "arrival", arrival_ns, epoch=bool(self.arrival_epoch))]
-            self.rec.send_columns(entity, indexes=idx, columns=components(rr, c), strict=True)
+            idx = [time_index("t", t_ns, epoch=bool(self.epoch)), time_index("step", step, epoch=None),
+                   time_index("arrival", arrival_ns, epoch=bool(self.arrival_epoch))]
+            self.rec.send_columns(entity, indexes=idx, columns=components(c), strict=True)
             self.rows_written += len(c)
             self.written.add("/" + entity)
         return len(self.written) != n_written

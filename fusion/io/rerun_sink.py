@@ -1,7 +1,7 @@
 """Every tracker step into a Rerun .rrd file, in columns, at a cost that does not grow with the
 number of tracks.
 
-Rerun costs ~0.1-0.5 ms per `send_columns` call here, whatever its size, so rows are buffered and
+Rerun costs ~0.1 ms or more per `send_columns` call here, whatever its size, so rows are buffered and
 written with one call per entity (fusion.io.rerun_file writes them), and the number of entities is
 bounded: the data of record are
 three all-track entities (record/*: one row per estimate, association or event), scored every
@@ -82,7 +82,8 @@ def _of_record(entity: str) -> bool:
 
 
 TRUTH_WAIT_NS = 2_000_000_000  # how long (arrival time) an estimate waits for its time's truth: RerunSink._flush
-# The views are written every 15 s: Rerun costs ~0.1-0.5 ms per entity written and the views are
+# The views are written every 15 s: Rerun costs ~0.1-0.5 ms per entity written (before the arrays were
+# built as arrow here, fusion.io.arrow_columns: ~0.1-0.2 ms for a view's entity since) and the views are
 # ~130 entities (6 tracks' series, counts, trails); every 5 s that was ~10 ms per second of CPU,
 # ~10 us per measurement at 1000 measurements/s. The record is written every write_interval_s.
 VIEW_INTERVAL_S = 15.0

@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 
 from fusion.core.checks import Array
-from fusion.io.columns import time_column
+from fusion.io.arrow_columns import time_index
 from fusion.io.labels import is_epoch, short_id
 from fusion.io.palette import colour, series_colours
 from fusion.smoothing import SmoothedTrack
@@ -36,7 +36,7 @@ def _series(rec: Any, entity: str, names: Sequence[str], t_ns: Array, values: Ar
     style = rr.SeriesLines(names=list(names)) if colours is None else \
         rr.SeriesLines(names=list(names), colors=[list(c) for c in colours], widths=[width] * len(names))
     rec.log(entity, style, static=True)
-    rec.send_columns(entity, indexes=[time_column(rr, "t", t_ns.tolist(), epoch=epoch)],
+    rec.send_columns(entity, indexes=[time_index("t", t_ns, epoch=epoch)],
                      columns=rr.Scalars.columns(scalars=values.ravel()).partition([values.shape[1]] * len(values)))
 
 

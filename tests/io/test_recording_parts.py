@@ -11,7 +11,7 @@ import pyarrow as pa
 import pytest
 
 from fusion.io import trail
-from fusion.io.columns import Column, _field, stack
+from fusion.io.columns import Column, field_arrow, stack
 from fusion.io.recording import RotatingSink
 
 SEED = 20261202
@@ -63,7 +63,7 @@ def test_arrow_label_lists_concatenate_across_chunks() -> None:
         np.cumsum(lens, out=offsets[1:])
         c.extend([0] * len(lens), [0] * len(lens), [0] * len(lens),
                  gated=pa.ListArray.from_arrays(pa.array(offsets), pa.array(flat, pa.string())))
-    got = _field(c.field("gated"))
+    got = field_arrow(c.field("gated"))
     assert got.to_pylist() == [["a", "b"], [], ["c"], [], ["d"]]
 
 

@@ -152,12 +152,12 @@ def _scans(ms: list[_Point]) -> tuple[ScanPoints, ...]:
 def _rows(c: Column) -> list[Any]:
     t, step, arr = c.times()
     fields = {}
-    for k in c.chunks[0][3]:
+    for k in c.names():
         if k in ("p", "rgba"):
             flat, lens = c.ragged(k, 3 if k == "p" else 4, np.float64 if k == "p" else np.uint8)
             fields[k] = (flat.tolist(), lens.tolist())
             continue
-        v = c.field(k)  # as arrow holds it (what the recording gets: fusion.io.columns.components)
+        v = c.field(k)  # as arrow holds it (what the recording gets: fusion.io.arrow_columns.components)
         fields[k] = (v if isinstance(v, pa.Array) else pa.array(v)).to_pylist()
     return [t.tolist(), step.tolist(), arr.tolist(), {k: repr(v) for k, v in fields.items()}]
 
