@@ -5,9 +5,10 @@ Rerun's archetype builders (`rr.Scalars.columns(...).partition(...)`, `rr.TimeCo
 convert every field through their Python component classes. Built with them, writing one
 entity of scalars (fusion.io.rerun_file.RerunFile.send: 300 rows of 2 values, or 40 of 3, with
 its three time columns) took 150-180 us of thread CPU; with the arrays made once, as numpy, and
-wrapped as the same arrow arrays, 80-90 us (2026-12-06, ~30 us of it Rerun's call). The result is the same data with the same types and component descriptors as the archetype
-builders give (tests/io/test_arrow_columns.py compares them for every kind the sink writes):
-the types and descriptors are taken from Rerun's own builders, once, on a one-row example
+wrapped as the same arrow arrays, 80-90 us (2026-12-06; ~50 us of it Rerun's call). The result
+is the same data with the same types and component descriptors as the archetype builders give
+(tests/io/test_arrow_columns.py compares them for every kind the sink writes): the types and
+descriptors are taken from Rerun's own builders, once, on a one-row example
 (`_proto`), so they follow Rerun's schema rather than a copy of it.
 
 What goes through Rerun's public column interfaces: `rr.ComponentColumn` (a component batch,
@@ -17,7 +18,7 @@ anything with `as_arrow_array`, and its row offsets) and `rr.TimeColumnLike` (an
 Kinds (Column.kind -> archetype): scalars -> Scalars (every row `width` values), points ->
 Points3D (rows of varying numbers of points, per-point colours and labels), strips ->
 LineStrips3D (one strip a row), ellipsoids -> Ellipsoids3D, text -> TextLog, record -> AnyValues
-(one component per field, named by it).
+(one component per field, named by it: `field_arrow` and `record_block` make its arrays).
 """
 
 from __future__ import annotations
@@ -30,7 +31,7 @@ import numpy as np
 import pyarrow as pa
 
 from fusion.core.checks import Array
-from fusion.io.columns import Column, field_arrow, record_block
+from fusion.io.columns import Column
 
 
 class _Batch:
@@ -180,6 +181,29 @@ def _text(c: Column) -> list[Any]:
     rows = _unit(len(c))
     return [_col("text", "text", pa.array(c.field("text"), type=pa.string()), rows),
             _col("text", "level", pa.array(c.field("level"), type=pa.string()), rows)]
+
+
+def field_arrow(values: Array | list[Any]) -> Any:
+    """A record field as an arrow array: float vectors as lists of float64, the rest as given."""
+    if isinstance(values, pa.Array):
+        return values
+    if isinstance(values, np.ndarray):
+        return pa.array(values)
+    first = values[0]
+    if isinstance(first, np.ndarray):
+        offsets = np.zeros(len(values) + 1, dtype=np.int32)
+        np.cumsum([v.size for v in values], out=offsets[1:])
+        flat = np.concatenate([v.ravel() for v in values]) if offsets[-1] else np.empty(0)
+        return pa.ListArray.from_arrays(pa.array(offsets), pa.array(flat, pa.float64()))
+    return pa.array(values)
+
+
+def record_block(blocks: list[Array]) -> Any:
+    """(rows, width) blocks as one list<float64> array: a vector per row, no per-row work."""
+    flat = np.concatenate(blocks)
+    n, width = flat.shape
+    offsets = np.arange(0, n * width + 1, width, dtype=np.int32)
+    return pa.ListArray.from_arrays(pa.array(offsets), pa.array(flat.ravel(), pa.float64()))
 
 
 def _record(c: Column) -> list[Any]:

@@ -14,8 +14,8 @@ import pyarrow as pa
 import pytest
 import rerun as rr
 
-from fusion.io.arrow_columns import components, time_index
-from fusion.io.columns import Column, Ragged, field_arrow, record_block
+from fusion.io.arrow_columns import components, field_arrow, record_block, time_index
+from fusion.io.columns import Column, Ragged
 from fusion.io.rrd_read import read_chunks
 
 SEED = 20261206

@@ -11,7 +11,8 @@ import pyarrow as pa
 import pytest
 
 from fusion.io import trail
-from fusion.io.columns import Column, field_arrow, stack
+from fusion.io.arrow_columns import field_arrow
+from fusion.io.columns import Column, stack
 from fusion.io.recording import RotatingSink
 
 SEED = 20261202
