@@ -90,7 +90,7 @@ def _proto(kind: str) -> dict[str, tuple[Any, pa.DataType]]:
     out = {}
     for col in one:
         d = col.component_descriptor()
-        out[str(d).split(":")[-1]] = (d, col.component_batch.as_arrow_array().type)
+        out[d.component.rpartition(":")[2]] = (d, col.component_batch.as_arrow_array().type)  # "Points3D:radii"
     return out
 
 

@@ -82,10 +82,10 @@ def _of_record(entity: str) -> bool:
 
 
 TRUTH_WAIT_NS = 2_000_000_000  # how long (arrival time) an estimate waits for its time's truth: RerunSink._flush
-# The views are written every 15 s: Rerun costs ~0.1-0.5 ms per entity written (before the arrays were
-# built as arrow here, fusion.io.arrow_columns: ~0.1-0.2 ms for a view's entity since) and the views are
-# ~130 entities (6 tracks' series, counts, trails); every 5 s that was ~10 ms per second of CPU,
-# ~10 us per measurement at 1000 measurements/s. The record is written every write_interval_s.
+# The views are written every 15 s: writing an entity costs ~0.1-0.2 ms (~0.1-0.5 ms before its
+# arrays were built here, fusion.io.arrow_columns) and the views are ~130 entities (6 tracks'
+# series, counts, trails); every 5 s that was ~10 ms per second of CPU, ~10 us per measurement at
+# 1000 measurements/s. The record is written every write_interval_s.
 VIEW_INTERVAL_S = 15.0
 # A record entity is written once it holds this many rows, before write_interval_s if need be:
 # Rerun compresses chunks of up to ~5 000 estimate rows to ~176 bytes per row and larger ones to
