@@ -102,13 +102,10 @@ def serve(args: argparse.Namespace) -> int:
     from fusion.io.gc_tuning import settle_garbage_collector
 
     settle_garbage_collector()  # after start-up: see fusion.io.gc_tuning for the measured cost
-    from fusion.io.heap_trim import HeapTrimmer
-
     where = f"listening on {', '.join(listen)}" if mode == "peer" else f"connected to {', '.join(connect)}"
     rec = f"recording to {svc.sink.path}" if svc.sink is not None else "not recording"
     print(f"fusion serving namespace {cfg.namespace!r} ({where}); {rec}; Ctrl-C to stop", flush=True)
-    with HeapTrimmer.for_this_process():  # glibc's free pages back every few s: fusion.io.heap_trim
-        code = svc.run(duration_s=args.duration)
+    code = svc.run(duration_s=args.duration)
     st = svc.status_dict()
     print(f"stopped after {duration(time.monotonic() - t0)}: {counts_line(st['counts'])}")
     for f in _written(svc):

@@ -8,7 +8,9 @@ is closed: one row per chunk, dense over every (timeline, component) pair the fi
 by default keeps freed pages committed for `purge_delay` (1 000 ms) and purges them lazily, on
 later allocations; Python's heap and glibc's arenas stayed flat over the same soak
 (/proc/PID/smaps: 134 and 151 MB), the saw-tooth of resident memory was rerun's allocator alone.
-(Over 20 minutes glibc's arenas do grow, by their free holes: fusion.io.heap_trim.)
+Over 20-25 minutes both grow a little (measured from inside the soak's service, 2026-12-06;
+BENCHMARKS.md, Soak): glibc's main arena by the holes freed numpy arrays leave, and this
+allocator's resident part between rotations.
 
 Measured with the soak (`python -m bench --only soak`: 10 minutes at 10k measurements/s, 667
 targets, recording on; BENCHMARKS.md): resident memory after the first minute varied by 8.4-11.8 %
