@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from bench.soak import soak_figures
+from bench.soak import sample_line, soak_figures
 
 
 def _samples(rss: list[float], queued: list[int] | None = None) -> list[dict]:
@@ -27,3 +27,8 @@ def test_a_short_soak_uses_every_sample() -> None:
     f = soak_figures(_samples([300, 330, 360]))
     assert f["spread_after_1min"] == pytest.approx(0.2) and f["slope_after_1min_mb_per_min"] == pytest.approx(180)
     assert f["queued_max_after_1min"] is None
+
+
+def test_a_sample_prints_on_one_line_as_it_comes() -> None:
+    s = _samples([437.0])[0] | {"applied": 600318, "queued": 0}
+    assert sample_line(s) == "  t=    0 s  rss    437.0 MB (anon   337.0, file  100.0)  queued 0  applied 600318"
