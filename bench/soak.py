@@ -23,13 +23,12 @@ from fusion.io.memory import process_memory
 
 
 def soak_run(pub: Publisher, folder: Path, *, duration_s: float, rate: int = 10_000, every_s: float = 10.0,
-             recording: bool = True, live: bool = True) -> dict:
-    """The soak; with `live`, its heading and each sample printed as they come (a 30-minute soak
-    shows how it goes while it runs), the summary after (print_soak)."""
+             recording: bool = True) -> dict:
+    """The soak; its heading and each sample printed as they come (a 30-minute soak shows how it
+    goes while it runs), the summary after (print_soak)."""
     targets = round(rate / MSGS_PER_TARGET_S)
     folder.mkdir()
-    if live:
-        print(heading(rate, targets, duration_s, recording, every_s), flush=True)
+    print(heading(rate, targets, duration_s, recording, every_s), flush=True)
     samples: list[dict[str, Any]] = []
     with ServiceProcess(folder, recording=recording) as svc:
         pub.call("connect", svc.endpoint)
@@ -47,8 +46,7 @@ def soak_run(pub: Publisher, folder: Path, *, duration_s: float, rate: int = 10_
             samples.append({"t_s": k * every_s, "rss_mb": mem.rss_mb, "anon_mb": mem.anon_mb, "file_mb": mem.file_mb,
                             "queued": st.counts.queued if st else None, "applied": st.counts.applied if st else None,
                             "recording_bytes": st.recording_bytes if st else None})
-            if live:
-                print(sample_line(samples[-1]), flush=True)
+            print(sample_line(samples[-1]), flush=True)
             k += 1
         sent = pub.result(60.0)
         st = svc.status()
@@ -100,6 +98,7 @@ def soak_figures(samples: list[dict[str, Any]], *, settle_s: float = 60.0) -> di
 
 
 def heading(rate: int, targets: int, duration_s: float, recording: bool, every_s: float) -> str:
+    """What the soak runs, printed before its samples."""
     return (f"\nsoak: {rate}/s offered ({targets} targets) for {duration_s:.0f} s, recording "
             f"{'on' if recording else 'off'}; service VmRSS every {every_s:g} s (queued: as of the last status "
             f"refresh)")
@@ -111,13 +110,8 @@ def sample_line(s: dict[str, Any]) -> str:
             f"  queued {s['queued']}  applied {s['applied']}")
 
 
-def print_soak(r: dict[str, Any], *, samples: bool = False) -> None:
-    """The soak's summary; with `samples`, its heading and every sample before it (soak_run
-    prints those as they come unless told not to)."""
-    if samples:
-        print(heading(r["rate"], r["targets"], r["duration_s"], r["recording"], r["every_s"]))
-        for s in r["samples"]:
-            print(sample_line(s))
+def print_soak(r: dict[str, Any]) -> None:
+    """The soak's summary (soak_run printed its samples as they came; they are in r["samples"])."""
     h1, h2 = r["rss_halves_after_1min_mb"]
     print(f"\n| | VmRSS |\n|---|---|\n| start | {r['rss_start_mb']:.0f} MB |\n"
           f"| 60 s | {r['rss_at_1min_mb']:.0f} MB (anonymous {r['anon_at_1min_mb']:.0f} MB) |\n"
