@@ -6,7 +6,8 @@ PYTHONPATH (the benchmark's own code, the publisher and the client, is the worki
 
 Per pair: publish-to-estimate latency at 10k measurements/s offered (667 targets) and at 1k/s (67
 targets) over `duration_s` (20 s by default: a view flush, every 15 s, falls inside), and the
-blast throughput at 1000 targets (bench.service_e2e.throughput_run). Printed: each run, then the
+blast throughput at 100 and at 1000 targets (bench.service_e2e.throughput_run; at 100 targets a
+scan is ten times smaller, so what a scan or a step costs weighs more). Printed: each run, then the
 median and range of each figure per version and the ratio tree/base per pair.
 
     python -m bench --only tree_ab --base HEAD [--pairs 4]
@@ -59,13 +60,14 @@ def run(*, base: str = "HEAD", pairs: int = 4, duration_s: float = 20.0, quick: 
         pairs, duration_s = 1, 6.0
     rows: list[dict[str, Any]] = []
     with worktree(base) as (commit, base_tree), tempfile.TemporaryDirectory(prefix="fusion-tree-ab-") as d, \
-            Publisher() as pub:
+            Publisher() as pub, Publisher() as pub100:
         trees = {"base": base_tree, "tree": ROOT}
         print(f"tree A/B: the working tree against {base} ({commit}), {pairs} interleaved pairs, recording on; "
               f"load average {os.getloadavg()}", flush=True)
         tmp = Path(d)
         n = 150_000
         pub.call("prepare", {"targets": 1000, "messages": n, "seed": 1000}, timeout_s=300.0)
+        pub100.call("prepare", {"targets": 100, "messages": n, "seed": 100}, timeout_s=300.0)
         for k in range(pairs):
             for name in (("base", "tree") if k % 2 == 0 else ("tree", "base")):
                 row: dict[str, Any] = {"variant": name, "pair": k}
@@ -73,6 +75,9 @@ def run(*, base: str = "HEAD", pairs: int = 4, duration_s: float = 20.0, quick: 
                     for rate in (10_000, 1_000):
                         row[f"lat{rate}"] = latency_run(pub, tmp / f"lat-{rate}-{name}-{k}", rate=rate, recording=True,
                                                         duration_s=duration_s, grace_s=3.0)
+                    row["throughput100"] = throughput_run(pub100, tmp / f"tp100-{name}-{k}", n=n, targets=100,
+                                                          recording=True, window_s=5.0, warm_deadline_s=60.0,
+                                                          after_warm_s=40.0)
                     row["throughput"] = throughput_run(pub, tmp / f"tp-{name}-{k}", n=n, targets=1000, recording=True,
                                                        window_s=5.0, warm_deadline_s=60.0, after_warm_s=40.0)
                 rows.append(row)

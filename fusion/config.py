@@ -326,8 +326,9 @@ class RecordingConfig(Section):
     the file every 1 s (or once an entity holds 4 096 rows), in fewer, larger chunks: Rerun keeps a
     row of the file's footer index per chunk in memory until the file closes (fusion.io.allocator).
     `background`: the recording is written on a thread of its own that works while the loop waits
-    for samples (fusion.io.sink_thread), so a flush does not hold back the scans behind it; false
-    writes it on the loop, which waits for each flush. A killed service loses at most the last
+    for samples (fusion.io.sink_thread), so a flush does not hold back the scans behind it; in a
+    backlog, where the loop never waits, the loop writes it itself every 0.25 s, as with false;
+    false writes it on the loop, which waits for each flush. A killed service loses at most the last
     write_interval_s of the record, and what its thread had not written yet (at most ~10 s of rows,
     usually none; its raw input is in the stream file)."""
 

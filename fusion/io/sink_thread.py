@@ -13,7 +13,15 @@ when samples are queued, `loop_idle()` when the loop is about to wait for more),
 for at most `max_defer_s` in all per round of the calls it takes, so its work falls in the gaps
 between scans; Rerun's encoding and file writing
 release the GIL, so part of it runs on the other core whenever it runs. A loop that is never
-idle (a backlog) still has its recording written every max_defer_s. A flush is one call but
+idle (a backlog: samples wait for it when it ends a batch) makes the calls itself: at its
+`behind()`, once the oldest call waiting was queued max_defer_s ago, it takes them all and makes
+them on its own thread, as a recording on the loop would, while the writer waits for it (`turns`
+counts these). The two threads taking turns with the GIL cost the loop more than the calls
+themselves: in a blast at 100 targets the service applied ~34k measurements/s with the writer
+making them and ~38k with the loop making them (BENCHMARKS.md). A loop that keeps up (samples
+arrive while it works, but none wait when it ends a batch) leaves them to the writer: making a
+record flush between two scans would delay the next. The writer goes on by itself if the loop
+has not taken them within another max_defer_s (a loop that does not call behind()). A flush is one call but
 many parts (scoring, the views' derivation, one send per entity: 20-70 ms in all at 10k
 measurements/s, longer than the ~25 ms between two scans), so the sink also stops at `pause()`
 between its parts (fusion.io.rerun_sink), within the same budget; and the loop's intake marks
@@ -32,7 +40,8 @@ when the loop made them.
 
 Errors: the guard turns the sink's OSError and RuntimeError into a stopped recording (its
 `error`), as before; any other exception (a bug) stops the writer and is raised again on the
-loop's thread at its next call, as it would have been raised there before. `close()` queues the
+loop's thread at its next call (at once when the loop made the call: behind()), as it would have been
+raised there before. `close()` queues the
 close, waits for the writer to finish it and raises what it raised.
 """
 
@@ -76,6 +85,9 @@ class SinkThread:
         self._closing = False
         self._thread: threading.Thread | None = None
         self._defer_until = 0.0  # the end of this round's budget of waiting for the loop
+        self._making = threading.Lock()  # held by whoever makes calls: the writer, or the loop in a backlog
+        self._queued_at: float | None = None  # when the oldest call waiting was queued
+        self.turns = 0  # times the loop made the calls itself (a backlog: see maybe_flush)
         self._guard: GuardedSink | None = None
         self.waits = 0  # times the loop waited for room in the queue
         self.calls = 0  # calls made on the sink
@@ -108,6 +120,20 @@ class SinkThread:
     def maybe_flush(self) -> None:
         """The loop's call between batches (the sink's cadence: fusion.io.rerun_sink), queued."""
         self._put(0, self._guard.maybe_flush, ())  # type: ignore[union-attr]
+
+    def behind(self) -> None:
+        """The loop's call between two batches when samples are already waiting for it (a
+        backlog: it has no pause to leave to the writer): once the oldest call waiting was queued
+        max_defer_s ago, the loop makes the calls waiting itself, here, on its own thread."""
+        since = self._queued_at
+        if since is None or time.monotonic() - since < self._max_defer_s or not self._making.acquire(blocking=False):
+            return
+        try:
+            self.turns += 1
+            self._make_waiting(on_writer=False)
+        finally:
+            self._making.release()
+        self._raise_failure()
 
     def loop_busy(self) -> None:
         """The loop has samples to handle (the loop, or the intake as one arrives): the writer
@@ -166,6 +192,7 @@ class SinkThread:
             self._held += rows
             self._calls.append((rows, call, args, kw))
             if len(self._calls) == 1:
+                self._queued_at = time.monotonic()
                 self._cv.notify_all()
         self._raise_failure()
 
@@ -195,31 +222,50 @@ class SinkThread:
         self._closing = True
         self._guard.close()  # type: ignore[union-attr]
 
-    def _run(self) -> None:
+    def _make_waiting(self, *, on_writer: bool) -> None:
+        """Make the calls waiting, in order (the caller holds _making). On the writer's thread it
+        stops at pause() before each; a call that raises stops the recording's thread (`_failure`)."""
+        with self._cv:
+            calls = list(self._calls)
+            self._calls.clear()
+            self._taken = len(calls)
+            self._queued_at = None
         try:
-            while not self._closing:
-                with self._cv:
-                    if not self._calls:
-                        self._cv.wait(0.5)
-                self._defer_until = time.monotonic() + self._max_defer_s  # this round's budget
-                self._loop_idle.wait(self._max_defer_s)
-                with self._cv:
-                    calls = list(self._calls)
-                    self._calls.clear()
-                    self._taken = len(calls)
-                for rows, call, args, kw in calls:
+            for rows, call, args, kw in calls:
+                if on_writer:
                     self.pause()  # the loop got busy meanwhile: wait again, within the budget
-                    call(*args, **kw)
-                    self.calls += 1
-                    with self._cv:
-                        self._held -= rows
-                        self._taken -= 1
-                        self._cv.notify_all()
-                    if self._closing:
-                        break
+                call(*args, **kw)
+                self.calls += 1
+                with self._cv:
+                    self._held -= rows
+                    self._taken -= 1
+                    self._cv.notify_all()
+                if self._closing:
+                    break
         except BaseException as e:  # a bug in the recording: raised again on the loop's thread
             self._failure = e
+            self._closing = True
             with self._cv:
                 self._calls.clear()
                 self._held = self._taken = 0
                 self._cv.notify_all()
+
+    def _run(self) -> None:
+        while not self._closing:
+            with self._cv:
+                if not self._calls:
+                    self._cv.wait(0.5)
+                    continue
+            self._defer_until = time.monotonic() + self._max_defer_s  # this round's budget
+            if not self._loop_idle.wait(self._max_defer_s):
+                # the loop may be in a backlog: then it makes the calls itself at its next behind()
+                # (two threads taking turns with the GIL cost it more than the calls); the writer
+                # goes on if it does not within another max_defer_s, or once the loop is idle
+                end, turns = time.monotonic() + self._max_defer_s, self.turns
+                with self._cv:
+                    while self.turns == turns and not self._loop_idle.is_set() and (left := end - time.monotonic()) > 0:
+                        self._cv.wait(min(left, 0.02))
+                if self.turns != turns:  # the loop made them: what it queued since is a new round
+                    continue
+            with self._making:
+                self._make_waiting(on_writer=True)

@@ -51,16 +51,18 @@ def record_scenario(name: str, path, *, duration_s: float | None = None, batch: 
                     shuffle_seed: int | None = None, flush_rows: int = 200_000, flush_interval_s: float = 0.5,
                     write_interval_s: float | None = None, write_rows: int | None = None,
                     view_interval_s: float | None = None, view_rows_max: int | None = None,
-                    view_slice: int | None = None, background: bool = False, late: tuple[int, float] | None = None,
-                    reorder: Callable[[list], list] | None = None):
+                    view_slice: int | None = None, background: bool = False, behind: bool = False,
+                    late: tuple[int, float] | None = None, reorder: Callable[[list], list] | None = None):
     """The reference scenario `name` (configs/scenarios/<name>.toml) as the service runs it: its
     stream of samples (measurements and truth) through the Pipeline with a RerunSink writing
     `path` (flushed and written as the arguments say; view_interval_s, view_rows_max None: the sink's defaults), `batch`
     samples per ingest; with `shuffle_seed`, the measurements of each block of 40
     samples come in a seeded random order (more late arrivals; truth keeps its places); with
     `background`, the sink behind the service's recording thread (fusion.io.sink_thread, the loop's
-    counts taken before every call); with `late` = (n, s), every n-th measurement comes after the
-    samples of the next s seconds of sensor time (a replay from far back in the window); `reorder`:
+    counts taken before every call); with `behind` too, the loop always busy and behind after every
+    batch, with max_defer_s 0 (the loop and the writer both make calls, in turns as they come);
+    with `late` = (n, s), every n-th measurement comes after the samples of the next s seconds of
+    sensor time (a replay from far back in the window); `reorder`:
     any other change of the records (arrival_ns, key, payload), made last. Returns the pipeline
     (its tracker and counts) after the sink is closed."""
     import msgspec
@@ -69,7 +71,7 @@ def record_scenario(name: str, path, *, duration_s: float | None = None, batch: 
     from fusion.io.gain_groups import measured_components
     from fusion.io.recording_guard import GuardedSink
     from fusion.io.rerun_sink import VIEW_INTERVAL_S, VIEW_ROWS_MAX, VIEW_SLICE, WRITE_ROWS, RerunSink
-    from fusion.io.sink_thread import SinkThread
+    from fusion.io.sink_thread import MAX_DEFER_S, SinkThread
     from fusion.pipeline import Pipeline
     from publishers.spec import load_scenario_file, scenario_path
     from publishers.stream import build_stream
@@ -79,7 +81,8 @@ def record_scenario(name: str, path, *, duration_s: float | None = None, batch: 
     samples, _ = build_stream(spec, namespace=sf.service.namespace)
     tracker = Tracker(sf.service.tracker)
     pipe: Pipeline | None = None
-    writer = SinkThread(counts=lambda: pipe.counts().flat(), counts_every_s=0.0) if background else None  # type: ignore[union-attr]
+    writer = SinkThread(counts=lambda: pipe.counts().flat(), counts_every_s=0.0,  # type: ignore[union-attr]
+                        max_defer_s=0.0 if behind else MAX_DEFER_S) if background else None
     sink = RerunSink(path, recording_id=name, layout=tracker.layout, position_indices=tracker.position_indices,
                      velocity_indices=tracker.velocity_indices,
                      meta={"scenario": name, "measured": measured_components(tracker.sensors, tracker.layout)},
@@ -108,7 +111,11 @@ def record_scenario(name: str, path, *, duration_s: float | None = None, batch: 
         records = reorder(records)
     try:
         for i in range(0, len(records), batch):
+            if behind and writer is not None:
+                writer.loop_busy()
             pipe.ingest(records[i:i + batch])
+            if behind and writer is not None:
+                writer.behind()
     finally:
         (writer if writer is not None else sink).close()
         pipe.warn.flush()  # its held-back warnings now, not in another test's flush_all

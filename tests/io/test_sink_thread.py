@@ -1,8 +1,10 @@
 """The recording's thread (fusion.io.sink_thread): the sink gets the same calls in the same order
 (a recording through it has the digest of one written on the loop), the loop waits only when
-max_rows rows are queued and loses none, the writer waits while the loop is busy (at most
-max_defer_s), a bug in the recording is raised on the loop's thread, a failing file stops the
-recording and nothing else, and the counts it writes are those of the calls it has made."""
+max_rows rows are queued and loses none, the writer waits while the loop is busy, a loop behind
+(a backlog) makes the calls that waited max_defer_s itself and the writer goes on by itself
+after twice that, a bug in the recording is raised on the loop's thread, a failing file
+stops the recording and nothing else, and the counts it writes are those of the calls it has
+made."""
 
 from __future__ import annotations
 
@@ -35,7 +37,8 @@ class FakeSink:
         self.closed = False
 
     def _note(self, name: str, arg: Any) -> None:
-        self.calls.append((name, arg, None if self.counts is None else dict(self.counts()), time.monotonic()))
+        self.calls.append((name, arg, None if self.counts is None else dict(self.counts()), time.monotonic(),
+                           threading.current_thread().name))
 
     def log_step(self, result: StepResult, *, arrival_ns: int | None = None) -> None:
         if self.fail_at is not None and len(self.calls) >= self.fail_at:
@@ -65,8 +68,9 @@ def test_a_recording_through_the_thread_is_the_one_written_on_the_loop(tmp_path:
     kw: dict[str, Any] = {"duration_s": 20.0, "flush_rows": 300, "flush_interval_s": 1e9, "view_interval_s": 1e9}
     record_scenario("mix", tmp_path / "loop.rrd", **kw)
     record_scenario("mix", tmp_path / "thread.rrd", background=True, **kw)
-    a, b = digest(tmp_path / "loop.rrd"), digest(tmp_path / "thread.rrd")
-    assert a == b
+    record_scenario("mix", tmp_path / "turns.rrd", background=True, behind=True, **kw)  # both threads make calls
+    a, b, c = digest(tmp_path / "loop.rrd"), digest(tmp_path / "thread.rrd"), digest(tmp_path / "turns.rrd")
+    assert a == b == c
     assert a["/record/estimates"]["rows"] > 500 and "/counts/applied" in a
 
 
@@ -84,7 +88,7 @@ def test_calls_are_made_in_order_and_none_is_lost_when_the_loop_waits_for_room()
     assert fake.closed
 
 
-def test_the_writer_waits_while_the_loop_is_busy_and_goes_on_after_max_defer() -> None:
+def test_the_writer_waits_while_the_loop_is_busy_and_goes_on_after_twice_max_defer() -> None:
     fake = FakeSink()
     w = SinkThread(max_defer_s=1.5)
     w.start(GuardedSink(fake))
@@ -98,13 +102,57 @@ def test_the_writer_waits_while_the_loop_is_busy_and_goes_on_after_max_defer() -
     while not fake.calls and time.monotonic() < deadline:
         time.sleep(0.005)
     assert fake.calls and fake.calls[0][3] - t0 < 1.2, "not made as soon as the loop went idle"
-    w.loop_busy()  # busy for good: the writer goes on after max_defer_s
+    w.loop_busy()  # busy for good and no behind() from the loop: the writer goes on by itself
     t1 = time.monotonic()
     w.log_text(0, "busy for good")
+    deadline = time.monotonic() + 8.0
     while len(fake.calls) < 2 and time.monotonic() < deadline:
         time.sleep(0.005)
-    assert len(fake.calls) == 2 and 1.4 <= fake.calls[1][3] - t1 < 4.0
+    assert len(fake.calls) == 2 and 2.9 <= fake.calls[1][3] - t1 < 5.0
+    assert fake.calls[1][4] == "fusion-recording"
     w.close()
+
+
+def test_in_a_backlog_the_loop_makes_the_calls_itself() -> None:
+    """A loop that stays behind makes the calls waiting on its own thread, in order, once the
+    oldest has waited max_defer_s; meanwhile the writer's thread makes none of them."""
+    fake = FakeSink()
+    w = SinkThread(max_defer_s=0.2)
+    w.start(GuardedSink(fake))
+    w.loop_busy()
+    k = 0
+    end = time.monotonic() + 1.2
+    while time.monotonic() < end:  # batches of ~20 ms, each logging a text, with samples waiting after each
+        w.log_text(0, str(k))
+        k += 1
+        time.sleep(0.02)
+        w.maybe_flush()
+        w.behind()
+    assert 3 <= w.turns <= 6
+    assert [c[1] for c in fake.calls] == [str(i) for i in range(len(fake.calls))]
+    assert fake.calls and {c[4] for c in fake.calls} == {threading.current_thread().name}
+    w.loop_idle()  # the loop waits for samples: the rest is the writer's
+    w.log_text(0, str(k))
+    w.close()
+    assert [c[1] for c in fake.calls] == [str(i) for i in range(k + 1)]
+    assert fake.calls[-1][4] == "fusion-recording"
+
+
+def test_a_bug_in_a_call_the_loop_makes_is_raised_at_once_and_stops_the_writer() -> None:
+    w = SinkThread(max_defer_s=0.2)
+    w.start(GuardedSink(FakeSink(fail_at=0)))
+    w.loop_busy()
+    w.log_step(_results(1)[0])
+    w.behind()  # too early: nothing has waited max_defer_s
+    assert w.turns == 0
+    time.sleep(0.25)
+    with pytest.raises(ValueError, match="boom"):
+        w.behind()
+    assert w.turns == 1
+    with pytest.raises(ValueError, match="boom"):
+        w.log_text(0, "after")
+    with pytest.raises(ValueError, match="boom"):
+        w.close()
 
 
 def test_a_bug_in_the_recording_is_raised_on_the_loop_s_thread() -> None:
