@@ -138,12 +138,12 @@ def record(args: argparse.Namespace) -> int:
         print(f"recording fusion/{args.namespace}/meas/* and truth/* to {out}; Ctrl-C to stop", flush=True)
         with bar(enabled=wanted(args), desc="recorded", unit="sample") as b:
             while not stop.wait(0.2 if deadline is None else max(0.0, min(0.2, deadline - time.monotonic()))):
-                b(rec.frames)
+                b(rec.records)
                 if deadline is not None and time.monotonic() >= deadline:
                     break
         rec.close()
-    print(f"recorded {rec.frames} samples to {out}")
-    if rec.frames:
+    print(f"recorded {rec.records} samples to {out}")
+    if rec.records:
         print(f"replay them with:  fusion replay {out}")
     else:
         print(f"nothing was published on fusion/{args.namespace}/...: is a publisher running (fusion-publish "

@@ -36,8 +36,8 @@ class Recorder:
             self.writer.write(*item)
 
     @property
-    def frames(self) -> int:
-        return self.writer.frames
+    def records(self) -> int:
+        return self.writer.records
 
     def close(self) -> None:
         for s in self._subs:

@@ -42,7 +42,7 @@ class RotatingStream:
         self.files: list[Path] = []
         self.error: str | None = None
         self.lost = 0
-        self.frames = 0
+        self.records = 0  # written
         self._w: StreamWriter | None = None
         self._bytes = 0
         self._open()
@@ -114,7 +114,7 @@ class RotatingStream:
                 self.lost += n - i
                 return
             self._bytes = size
-            self.frames += j - i
+            self.records += j - i
             i = j
 
     def close(self) -> None:

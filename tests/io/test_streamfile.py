@@ -1,12 +1,18 @@
-"""Stream files: every complete frame survives a crash at any byte; .jsonl input; the recorder."""
+"""Stream files: every complete frame survives a crash at any byte (a frame per record, or per
+batch); version 1 files (a frame per record) still read; .jsonl input; the recorder."""
 
 from __future__ import annotations
 
+import json
 import logging
+import struct
 import time
+import zlib
 from pathlib import Path
 from typing import Any
 
+import msgspec
+import numpy as np
 import pytest
 
 from fusion import messages as m
@@ -36,18 +42,73 @@ def test_round_trip(tmp_path: Path) -> None:
     assert not r.truncated
 
 
-def test_a_batch_write_is_the_frames_of_record_writes(tmp_path: Path) -> None:
+def test_a_batch_is_one_frame_and_reads_back_as_its_records(tmp_path: Path) -> None:
     recs = _records(30)
     with StreamWriter(tmp_path / "one.fstream", namespace="t") as w:
         for r in recs:
             w.write(*r)
     with StreamWriter(tmp_path / "many.fstream", namespace="t") as w:
-        n = w.write_many(recs[:10]) + w.write_many([]) + w.write_many(recs[10:])
-        assert w.frames == 30
-    assert list(StreamReader(tmp_path / "many.fstream")) == recs
-    one, many = (tmp_path / "one.fstream").read_bytes(), (tmp_path / "many.fstream").read_bytes()
-    assert len(one) == len(many) and 0 < n < len(many)
-    assert one[-n:] == many[-n:], "the frames differ from those of one write per record"
+        first, none, n = w.write_many(recs[:10]), w.write_many([]), w.write_many(recs[10:])
+        assert w.records == 30 and none == 0
+    assert list(StreamReader(tmp_path / "many.fstream")) == list(StreamReader(tmp_path / "one.fstream")) == recs
+    many = (tmp_path / "many.fstream").read_bytes()
+    assert 0 < first + n < len(many) < (tmp_path / "one.fstream").stat().st_size
+    body = many[-n + 8:]
+    assert struct.unpack("<II", many[-n:-n + 8]) == (n - 8, zlib.crc32(body))
+    assert msgspec.msgpack.decode(body) == [list(r) for r in recs[10:]], "the last write is one frame of its records"
+
+
+def test_numpy_integers_and_byte_views_are_written_plain(tmp_path: Path) -> None:
+    recs = _records(3)
+    with StreamWriter(tmp_path / "s.fstream", namespace="t") as w:
+        w.write_many([(np.int64(a), k, memoryview(p)) for a, k, p in recs])
+    assert list(StreamReader(tmp_path / "s.fstream")) == recs
+
+
+def test_a_cut_batch_loses_that_batch_only(tmp_path: Path) -> None:
+    recs = _records(40)
+    full = tmp_path / "s.fstream"
+    with StreamWriter(full, namespace="t") as w:
+        w.write_many(recs[:25])
+        end = full.stat().st_size
+        w.write_many(recs[25:])
+    data = full.read_bytes()
+    cut = tmp_path / "cut.fstream"
+    for size in (end, end + 1, end + 8, len(data) - 1):
+        cut.write_bytes(data[:size])
+        reader = StreamReader(cut)
+        assert list(reader) == recs[:25] and reader.truncated == (size != end), size
+
+
+def _v1_file(path: Path, recs: list[tuple[int, str, bytes]]) -> None:
+    """A stream file as version 1 wrote it: a frame per record, its body one [arrival_ns, key, payload]."""
+    blob = json.dumps({"namespace": "t", "created_ns": 0}).encode()
+    out = [struct.pack("<8sHI", b"FUSIONST", 1, len(blob)), blob]
+    for r in recs:
+        body = msgspec.msgpack.encode(r)
+        out.append(struct.pack("<II", len(body), zlib.crc32(body)) + body)
+    path.write_bytes(b"".join(out))
+
+
+def test_version_1_files_still_read(tmp_path: Path) -> None:
+    recs = _records(12)
+    p = tmp_path / "old.fstream"
+    _v1_file(p, recs)
+    r = StreamReader(p)
+    assert r.version == 1 and r.meta["namespace"] == "t"
+    assert list(r) == recs and not r.truncated
+    p.write_bytes(p.read_bytes()[:-5])  # a cut last frame, as before
+    r = StreamReader(p)
+    assert list(r) == recs[:-1] and r.truncated
+    got, meta = read_records(p)
+    assert list(got) == recs[:-1] and meta["namespace"] == "t"
+
+
+def test_an_unknown_version_is_refused_with_the_versions_known(tmp_path: Path) -> None:
+    p = tmp_path / "new.fstream"
+    p.write_bytes(struct.pack("<8sHI", b"FUSIONST", 9, 2) + b"{}")
+    with pytest.raises(StreamFormatError, match="version 9, this reader knows 1, 2"):
+        StreamReader(p)
 
 
 def test_cut_at_every_byte_of_the_last_frames(tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
@@ -101,7 +162,7 @@ def test_recorder_over_zenoh(tmp_path: Path, zenoh_hub: tuple, zenoh_client: Any
     try:
         publish(zenoh_client(), samples, speed=0.0, match_timeout_s=5.0)
         deadline = time.monotonic() + 5.0
-        while rec.frames < len(samples) and time.monotonic() < deadline:
+        while rec.records < len(samples) and time.monotonic() < deadline:
             time.sleep(0.01)
     finally:
         rec.close()

@@ -56,7 +56,7 @@ def test_a_batch_write_rotates_where_record_writes_do(tmp_path: Path, batch: int
     for k in range(0, 50, batch):
         many.write_many(recs[k:k + batch])
     many.close()
-    assert many.frames == 50 and many.lost == 0
+    assert many.records == 50 and many.lost == 0
     assert [[r for r in StreamReader(f)] for f in many.files] == [[r for r in StreamReader(f)] for f in one.files]
 
 
@@ -70,7 +70,7 @@ def test_a_batch_that_cannot_be_written_is_counted_lost(tmp_path: Path) -> None:
     current[0] = d / "f-0001.rrd"
     s.write_many([rec(i) for i in range(5, 20)])
     s.close()
-    assert s.error is not None and s.frames == 5 and s.lost == 15
+    assert s.error is not None and s.records == 5 and s.lost == 15
 
 
 def test_a_stream_whose_folder_is_gone_stops_and_counts_what_it_lost(tmp_path: Path) -> None:
@@ -86,7 +86,7 @@ def test_a_stream_whose_folder_is_gone_stops_and_counts_what_it_lost(tmp_path: P
         s.write(*rec(i))  # never raises
     s.close()
     assert s.error is not None and "f-0001.fstream" in s.error
-    assert s.frames == 5 and s.lost == 15
+    assert s.records == 5 and s.lost == 15
 
 
 def test_retention_by_count_and_bytes_never_deletes_open_files(tmp_path: Path) -> None:
