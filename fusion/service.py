@@ -321,8 +321,8 @@ class Service:
                 self.snapshots.answer_waiting()
                 if self._recording is not None:
                     self._recording.maybe_flush()
-                    if self._writer is not None and self._q:  # a backlog: the loop may make the calls itself
-                        self._writer.behind()
+                    if batch and self._writer is not None and self._q:  # samples waited while it worked:
+                        self._writer.behind()  # a backlog, where the loop may make the calls itself
                 self._out.maybe_sweep()
                 if self.checkpoints is not None:
                     self.checkpoints.maybe_write(self.tracker)
