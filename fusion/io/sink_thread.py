@@ -11,22 +11,23 @@ The two threads share the GIL, so a flush running while the loop handles a scan 
 scan down as much as it did on the loop: the writer waits while the loop is busy (`loop_busy()`
 when samples are queued, `loop_idle()` when the loop is about to wait for more), before each call,
 for at most `max_defer_s` in all per round of the calls it takes, so its work falls in the gaps
-between scans; Rerun's encoding and file writing
-release the GIL, so part of it runs on the other core whenever it runs. A loop that is never
+between scans; Rerun's encoding and file writing release the GIL, so part of it runs on the
+other core whenever it runs. A loop that is never
 idle (a backlog: samples wait for it when it ends a batch) makes the calls itself: at its
 `behind()`, once the oldest call waiting was queued max_defer_s ago, it takes them all and makes
 them on its own thread, as a recording on the loop would, while the writer waits for it (`turns`
 counts these). The two threads taking turns with the GIL cost the loop more than the calls
-themselves: in a blast at 100 targets the service applied ~34k measurements/s with the writer
-making them and ~38k with the loop making them (BENCHMARKS.md). A loop that keeps up (samples
-arrive while it works, but none wait when it ends a batch) leaves them to the writer: making a
-record flush between two scans would delay the next. The writer goes on by itself if the loop
-has not taken them within another max_defer_s (a loop that does not call behind()). A flush is one call but
+themselves: in a blast at 100 targets the service applied 32-33k measurements/s with the writer
+making them and 36-37k with the loop making them (`[recording] background = false`;
+BENCHMARKS.md). A loop that keeps up (samples arrive while it works, but none wait when it ends
+a batch) leaves them to the writer: a record flush made between two scans would delay the next.
+The writer goes on by itself if the loop has not taken them within another max_defer_s (a loop
+that does not call behind()). A flush is one call but
 many parts (scoring, the views' derivation, one send per entity: 20-70 ms in all at 10k
 measurements/s, longer than the ~25 ms between two scans), so the sink also stops at `pause()`
 between its parts (fusion.io.rerun_sink), within the same budget; and the loop's intake marks
-the loop busy as a sample arrives (`loop_busy()` from the Zenoh callback), not only when the
-loop next looks: a flush that ran on while a scan's burst came in held the GIL from the
+the loop busy as samples arrive (`loop_busy()` from the intake's thread, fusion.io.channel_intake),
+not only when the loop next looks: a flush that ran on while a scan's burst came in held the GIL from the
 callbacks, the burst came in slowly, the loop took it in two batches and ran the scan twice.
 
 Bounded: at most `max_rows` rows (estimates, associations, truth samples, texts) wait in the
@@ -40,9 +41,9 @@ when the loop made them.
 
 Errors: the guard turns the sink's OSError and RuntimeError into a stopped recording (its
 `error`), as before; any other exception (a bug) stops the writer and is raised again on the
-loop's thread at its next call (at once when the loop made the call: behind()), as it would have been
-raised there before. `close()` queues the
-close, waits for the writer to finish it and raises what it raised.
+loop's thread at its next call (at once from behind() when the loop made the call), as it would
+have been raised there before. `close()` queues the close, waits for the writer to finish it and
+raises what it raised.
 """
 
 from __future__ import annotations
@@ -87,7 +88,7 @@ class SinkThread:
         self._defer_until = 0.0  # the end of this round's budget of waiting for the loop
         self._making = threading.Lock()  # held by whoever makes calls: the writer, or the loop in a backlog
         self._queued_at: float | None = None  # when the oldest call waiting was queued
-        self.turns = 0  # times the loop made the calls itself (a backlog: see maybe_flush)
+        self.turns = 0  # times the loop made the calls itself (a backlog: behind())
         self._guard: GuardedSink | None = None
         self.waits = 0  # times the loop waited for room in the queue
         self.calls = 0  # calls made on the sink
