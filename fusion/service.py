@@ -131,11 +131,8 @@ class Service:
     def _take(self, taken: Taken) -> None:
         """Samples from a subscriber's channel (fusion.io.channel_intake) into the intake queue;
         the loop woken if one was queued."""
-        offer, queued = self._q.offer, False
-        for arrival_ns, sample in taken:
-            payload = sample.payload
-            if offer(arrival_ns, str(sample.key_expr), len(payload), payload.to_bytes) is None:
-                queued = True
+        queued = self._q.offer_many([(arrival_ns, str(s.key_expr), len(p), p.to_bytes)
+                                     for arrival_ns, s in taken for p in (s.payload,)])
         # Event.set takes the event's lock even when it is set (0.55 us against 0.03 for is_set);
         # a set event is safe to skip: the loop clears it only before its next drain, which takes
         # these samples (and marks itself busy first if samples wait)

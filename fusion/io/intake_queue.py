@@ -1,7 +1,8 @@
 """The intake queue between Zenoh's callback threads and the tracker thread: bounded in samples
 and in bytes, a byte limit per message, per-source rate limits and fair queueing.
 
-Every sample, whatever its key, goes through `offer(arrival_ns, key, size, payload_fn)`:
+Every sample, whatever its key, goes through `offer(arrival_ns, key, size, payload_fn)` (or
+`offer_many`, a chunk of them in order):
   1. size > max_message_bytes: refused "too_large", before its bytes are copied or decoded;
   2. its source over its rate (a token bucket of `rate_hz`, `burst` deep, per source): refused
      "rate_limited";
@@ -36,6 +37,7 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 
 Record = tuple[int, str, bytes]
+Offer = tuple[int, str, int, Callable[[], bytes]]  # (arrival_ns, key, size, payload_fn): a sample offered
 # the Python objects of one queued sample beyond its payload's and key's bytes: the queue's tuple (offer
 # number, record, cost) and the record's (arrival, key, payload), their ints, the key's str and the
 # payload's bytes headers, the deque slot (CPython 3.11, tracemalloc: 490 bytes per sample of the e2e
@@ -133,43 +135,67 @@ class IntakeQueue:
     def offer(self, arrival_ns: int, key: str, size: int, payload: Callable[[], bytes]) -> str | None:
         """Queue one sample; None when queued, else the reason it was refused. `payload` is
         called (the bytes copied) only once the sample is admitted."""
+        refusals: list[tuple[int, str]] = []
+        self.offer_many(((arrival_ns, key, size, payload),), refusals)
+        return refusals[0][1] if refusals else None
+
+    def offer_many(self, samples: Iterable[Offer], refusals: list[tuple[int, str]] | None = None) -> int:
+        """Queue samples (arrival_ns, key, size, payload_fn) in their order, each exactly as
+        `offer` would, under one taking of the lock (a Zenoh channel's chunk: 0.5 us a sample
+        against 1.2 one at a time, the accessors of the Zenoh samples included; 2026-12-06). Returns how many were
+        queued; (index, reason) of each refused one is appended to `refusals` when given."""
         lim = self.limits
+        max_bytes, limited = lim.max_message_bytes, lim.rate_hz > 0
+        queue_max, queue_max_bytes = lim.queue_max, lim.queue_max_bytes
+        classes, queues = self._classes, self._queues
+        queued = 0
+        last_key: str | None = None
+        cls = ""
         with self._lock:
-            cls = self._classes.get(key)
-            if cls is None:  # a few keys carry every sample: each is classified once
-                if len(self._classes) >= 4096:
-                    self._classes.clear()
-                cls = self._classes[key] = source_class(key, self._known)
-            self.offered += 1
-            if size > lim.max_message_bytes:
-                self._refuse(cls, TOO_LARGE)
-                return TOO_LARGE
-            if not self._rate_ok(cls):
-                self._refuse(cls, RATE_LIMITED)
-                return RATE_LIMITED
-            cost = size + len(key) + RECORD_OVERHEAD_BYTES
-            while self._len + 1 > lim.queue_max or self._bytes + cost > lim.queue_max_bytes:
-                victim = self._biggest()
-                if victim is None or victim == cls or len(self._queues[victim]) <= len(self._queues.get(cls, ())):
-                    self._refuse(cls, OVERLOAD)
-                    return OVERLOAD
-                _, _, vcost = self._queues[victim].popleft()
-                self._len -= 1
-                self._bytes -= vcost
-                self._refuse(victim, OVERLOAD)
-            q = self._queues.get(cls)
-            if q is None:
-                q = self._queues[cls] = deque()
-                self._order = sorted(self._queues)
-            q.append((self._seq, (arrival_ns, key, payload()), cost))
-            self._seq += 1
-            self._len += 1
-            self._bytes += cost
-            if self._len > self.max_depth:
-                self.max_depth = self._len
-            if self._bytes > self.max_bytes:
-                self.max_bytes = self._bytes
-            return None
+            for i, (arrival_ns, key, size, payload) in enumerate(samples):
+                if key != last_key:  # a chunk's samples mostly share their key
+                    c = classes.get(key)
+                    if c is None:  # a few keys carry every sample: each is classified once
+                        if len(classes) >= 4096:
+                            classes.clear()
+                        c = classes[key] = source_class(key, self._known)
+                    cls, last_key = c, key
+                self.offered += 1
+                reason = None
+                if size > max_bytes:
+                    reason = TOO_LARGE
+                elif limited and not self._rate_ok(cls):
+                    reason = RATE_LIMITED
+                else:
+                    cost = size + len(key) + RECORD_OVERHEAD_BYTES
+                    while self._len + 1 > queue_max or self._bytes + cost > queue_max_bytes:
+                        victim = self._biggest()
+                        if victim is None or victim == cls or len(queues[victim]) <= len(queues.get(cls, ())):
+                            reason = OVERLOAD
+                            break
+                        _, _, vcost = queues[victim].popleft()
+                        self._len -= 1
+                        self._bytes -= vcost
+                        self._refuse(victim, OVERLOAD)
+                if reason is not None:
+                    self._refuse(cls, reason)
+                    if refusals is not None:
+                        refusals.append((i, reason))
+                    continue
+                q = queues.get(cls)
+                if q is None:
+                    q = queues[cls] = deque()
+                    self._order = sorted(queues)
+                q.append((self._seq, (arrival_ns, key, payload()), cost))
+                self._seq += 1
+                self._len += 1
+                self._bytes += cost
+                queued += 1
+                if self._len > self.max_depth:
+                    self.max_depth = self._len
+                if self._bytes > self.max_bytes:
+                    self.max_bytes = self._bytes
+        return queued
 
     def _biggest(self) -> str | None:
         """The class with the most samples queued (ties: the first in sorted order)."""

@@ -5,6 +5,8 @@ from __future__ import annotations
 import threading
 
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from fusion.io.intake_queue import RECORD_OVERHEAD_BYTES, IntakeLimits, IntakeQueue, source_class
 
@@ -147,3 +149,36 @@ def test_limits_are_checked() -> None:
         IntakeLimits(queue_max=0, queue_max_bytes=1, max_message_bytes=1)
     with pytest.raises(ValueError):
         IntakeLimits(queue_max=1, queue_max_bytes=1, max_message_bytes=1, rate_hz=-1.0)
+
+
+def _state(q: IntakeQueue) -> tuple:
+    return (q.offered, len(q), q.nbytes, q.max_depth, q.max_bytes, dict(q.refused), dict(q.refused_by_source),
+            q.depth_by_source(), q.drain(10**6))
+
+
+@settings(max_examples=150, deadline=None)
+@given(st.lists(st.tuples(st.sampled_from([key("meas", "cam1"), key("meas", "radar1"), key("truth", "a"),
+                                           key("meas", "ghost")]), st.integers(0, 140)), max_size=120),
+       st.lists(st.integers(1, 40), min_size=1, max_size=10), st.sampled_from([0.0, 50.0]))
+def test_offer_many_is_offer_sample_by_sample(samples: list[tuple[str, int]], cuts: list[int], rate: float) -> None:
+    """A chunk offered at once (the service's intake) leaves the queue, its counts and its
+    refusals as the same samples offered one at a time, however the stream is cut into chunks:
+    key changes inside a chunk, payloads over the byte limit, evictions and rate limits."""
+    t = [0.0]
+    lim = IntakeLimits(queue_max=25, queue_max_bytes=12_000, max_message_bytes=120, rate_hz=rate, burst=5)
+    one = IntakeQueue(lim, known=KNOWN, clock=lambda: t[0])
+    many = IntakeQueue(lim, known=KNOWN, clock=lambda: t[0])
+    offers = [(i, k, n, (lambda n=n: b"p" * n)) for i, (k, n) in enumerate(samples)]
+    expected = [(i, r) for i, (a, k, n, p) in enumerate(offers) if (r := one.offer(a, k, n, p)) is not None]
+    got: list[tuple[int, str]] = []
+    start, c = 0, 0
+    while start < len(offers):
+        chunk = offers[start:start + cuts[c % len(cuts)]]
+        found: list[tuple[int, str]] = []
+        queued = many.offer_many(chunk, found)
+        assert queued == len(chunk) - len(found)
+        got.extend((start + i, r) for i, r in found)
+        start, c = start + len(chunk), c + 1
+    assert got == expected
+    assert _state(many) == _state(one)
+    assert adds_up(many)
