@@ -78,6 +78,7 @@ class Clocks:
 
     def __init__(self, sources: Iterable[str], *, samples: int, outliers: int, idle_ns: int) -> None:
         self.sources = {s: SourceClock(samples, outliers) for s in sorted(sources)}
+        self.samples, self.outliers = samples, outliers
         self.idle_ns = idle_ns
         self._first_arrival: int | None = None
 

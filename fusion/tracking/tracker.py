@@ -217,24 +217,26 @@ class Tracker:
 
     def _admit(self, items: Iterable[Detection | ControlInput]
                ) -> tuple[list[Detection], list[ControlInput], list[Refusal]]:
-        accepted: list[Detection] = []
+        items = list(items)
         inputs: list[ControlInput] = []
-        refused: list[Refusal] = []
-        admit, received = self.intake.admit, 0
-        for d in items:
-            received += 1
-            if isinstance(d, ControlInput):
-                c, bad = self.intake.admit_input(d)
-                if c is not None:
-                    inputs.append(c)
-            else:
-                ok, bad = admit(d)
-                if ok is not None:
-                    accepted.append(ok)
-            if bad is not None:
-                refused.append(bad)
-                self.refused_counts[bad.reason] = self.refused_counts.get(bad.reason, 0) + 1
-        self.intake_counts["received"] += received
+        if not any(isinstance(d, ControlInput) for d in items):
+            accepted, refused = self.intake.admit_many(items)  # type: ignore[arg-type]
+        else:
+            accepted, refused = [], []
+            for d in items:
+                if isinstance(d, ControlInput):
+                    c, bad = self.intake.admit_input(d)
+                    if c is not None:
+                        inputs.append(c)
+                else:
+                    ok, bad = self.intake.admit(d)
+                    if ok is not None:
+                        accepted.append(ok)
+                if bad is not None:
+                    refused.append(bad)
+        for bad in refused:
+            self.refused_counts[bad.reason] = self.refused_counts.get(bad.reason, 0) + 1
+        self.intake_counts["received"] += len(items)
         self.intake_counts["applied"] += len(accepted)
         self.intake_counts["inputs"] += len(inputs)
         return accepted, inputs, refused

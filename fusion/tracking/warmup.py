@@ -1,6 +1,6 @@
 """Compile (or load from numba's cache) every kernel a tracker configuration runs, before data.
 
-The tracker's compiled kernels (fusion.core.compiled*, the lifecycle and id-set kernels) are
+The tracker's compiled kernels (fusion.core.compiled*, the lifecycle, id-set and intake window kernels) are
 compiled lazily by numba at their first call and cached on disk (`cache=True`). On the first run
 after an install that first call costs about 20 s on the reference machine; a service meeting it
 on its first measurement falls that far behind its sensors, and a demo's first run looks stalled.
