@@ -142,14 +142,10 @@ class ReviewBlocks:
         blocks and its subsets), then the rows picked."""
         got = self._flat.get((name, cut))
         if got is None:
-            parts: list[Array] = []
-            off = np.zeros(len(self.blocks), dtype=np.int64)
-            o = 0
-            for k, a in enumerate(self._arrays(name)):
-                if a is not None:
-                    parts.append(a if cut is None else a[:, :cut])
-                    off[k] = o
-                    o += len(a)
+            arrays = self._arrays(name)
+            rows = np.fromiter([0 if a is None else len(a) for a in arrays], dtype=np.int64, count=len(arrays))
+            off = np.cumsum(rows) - rows  # each block's first row in the concatenation
+            parts = [a if cut is None else a[:, :cut] for a in arrays if a is not None]
             got = self._flat[(name, cut)] = (np.concatenate(parts), off)
         flat, off = got
         return flat[off[self.which[at]] + self.row[at]]
