@@ -1,6 +1,6 @@
 """Interleaved A/B of two versions of the code: the working tree against a git revision (a
 detached worktree of it, made for the run and removed after), both the real `fusion serve` of
-bench.service_e2e with the shipped configuration (configs/service.toml, recording on), a fresh
+bench.service_e2e with the shipped configuration (each tree's configs/service.toml, recording on), a fresh
 service for every run, alternating A, B, B, A... The service runs from one tree or the other by
 PYTHONPATH (the benchmark's own code, the publisher and the client, is the working tree's).
 
@@ -22,6 +22,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
+from bench import e2e_procs
 from bench.ab_table import FIGURES, print_ab, value
 from bench.e2e_procs import Publisher
 from bench.service_e2e import latency_run, throughput_run
@@ -43,12 +44,15 @@ def worktree(rev: str):
 
 @contextmanager
 def code_of(tree: Path):
-    """`fusion serve` started inside the block runs the code of `tree`."""
-    old = os.environ.get("PYTHONPATH")
+    """`fusion serve` started inside the block runs the code of `tree` with the shipped
+    configuration of `tree` (its configs/service.toml: a tree's settings are part of it)."""
+    old, old_config = os.environ.get("PYTHONPATH"), e2e_procs.CONFIG
     os.environ["PYTHONPATH"] = str(tree)
+    e2e_procs.CONFIG = tree / "configs" / "service.toml"
     try:
         yield
     finally:
+        e2e_procs.CONFIG = old_config
         if old is None:
             del os.environ["PYTHONPATH"]
         else:
