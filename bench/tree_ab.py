@@ -1,8 +1,9 @@
 """Interleaved A/B of two versions of the code: the working tree against a git revision (a
 detached worktree of it, made for the run and removed after), both the real `fusion serve` of
-bench.service_e2e with the shipped configuration (each tree's configs/service.toml, recording on), a fresh
-service for every run, alternating A, B, B, A... The service runs from one tree or the other by
-PYTHONPATH (the benchmark's own code, the publisher and the client, is the working tree's).
+bench.service_e2e with the shipped configuration (each tree's own configs/service.toml,
+recording on), a fresh service for every run, alternating A, B, B, A... The service runs from
+one tree or the other by PYTHONPATH (the benchmark's own code, the publisher and the client, is
+the working tree's).
 
 Per pair: publish-to-estimate latency at 10k measurements/s offered (667 targets) and at 1k/s (67
 targets) over `duration_s` (20 s by default: a view flush, every 15 s, falls inside), and the

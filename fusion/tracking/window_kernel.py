@@ -15,8 +15,9 @@ order, each with its arrival time a_i known (fusion.tracking.clock, fusion.track
     too late when t_i < horizon (code 2) or (t_i, s) <= the committed scan (code 3).
 The same integer arithmetic in the same order as the Python, on int64: `window_steps` takes
 the detections only when every time, offset and bound is within the limits below, so that no
-sum overflows (otherwise Intake.admit_many takes them one at a time, in Python's integers). Sources are indexed in sorted
-order of their ids, so comparing (t, source) with the committed key is comparing (t, index).
+sum overflows (otherwise Intake.admit_many takes them one at a time, in Python's integers).
+Sources are indexed in sorted order of their ids, so comparing (t, source) with the committed
+key is comparing (t, index).
 """
 
 from __future__ import annotations
