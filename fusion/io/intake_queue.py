@@ -141,9 +141,10 @@ class IntakeQueue:
 
     def offer_many(self, samples: Iterable[Offer], refusals: list[tuple[int, str]] | None = None) -> int:
         """Queue samples (arrival_ns, key, size, payload_fn) in their order, each exactly as
-        `offer` would, under one taking of the lock (a Zenoh channel's chunk: 0.5 us a sample
-        against 1.2 one at a time, the accessors of the Zenoh samples included; 2026-12-06). Returns how many were
-        queued; (index, reason) of each refused one is appended to `refusals` when given."""
+        `offer` would, under one taking of the lock: a Zenoh channel's chunk, 0.87-0.93 us a
+        sample against 1.19 one at a time, the Zenoh samples' accessors included (timeit, 50 000
+        real samples, 2026-12-06). Returns how many were queued; (index, reason) of each refused
+        one is appended to `refusals` when given."""
         lim = self.limits
         max_bytes, limited = lim.max_message_bytes, lim.rate_hz > 0
         queue_max, queue_max_bytes = lim.queue_max, lim.queue_max_bytes
