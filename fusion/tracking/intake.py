@@ -106,8 +106,7 @@ class Intake:
                     continue
                 ident = (sid, seq, t_ns, d.epoch)
                 if ident in seen:
-                    refused.append((i, Refusal(sid, t_ns, seq, Reason.DUPLICATE,
-                                               f"seq {seq} of {sid} at this time seen before")))
+                    refused.append((i, _duplicate(sid, t_ns, seq)))
                     continue
                 seen.add(ident)
                 accepted.append(d)
@@ -148,7 +147,7 @@ class Intake:
         ident = (source, seq, t_ns, epoch)  # _new, inline
         seen = self._seen
         if ident in seen:
-            return Refusal(source, t_ns, seq, Reason.DUPLICATE, f"seq {seq} of {source} at this time seen before")
+            return _duplicate(source, t_ns, seq)
         seen.add(ident)
         return None
 
@@ -227,6 +226,10 @@ class Intake:
 
 
 _FIRST = itemgetter(0)
+
+
+def _duplicate(source: str, t_ns: int, seq: int) -> Refusal:
+    return Refusal(source, t_ns, seq, Reason.DUPLICATE, f"seq {seq} of {source} at this time seen before")
 
 
 def _window_refusal(source: str, t_ns: int, seq: int, code: int, value: int) -> Refusal:

@@ -162,15 +162,16 @@ def window_steps(clocks: Clocks, source: list[str], t_ns: list[int], arrival_ns:
     offset = np.zeros(S, np.int64)
     has_offset = np.zeros(S, np.bool_)
     for k, name in enumerate(names):
-        offsets, last_k = clocks.sources[name].state()
+        clock = clocks.sources[name]
+        offsets, last_k = clock.state()
         if any(not -LIMIT_OFFSET <= o <= LIMIT_OFFSET for o in offsets):
             return None
         c = len(offsets)
         ring[k, :c] = offsets
         srt[k, :c] = sorted(offsets)
         count[k] = c
-        if c:
-            offset[k], has_offset[k] = srt[k, max(c - clocks.outliers - 1, 0)], True
+        if clock.offset is not None:  # the clock's own (outliers + 1)-th largest
+            offset[k], has_offset[k] = clock.offset, True
         if last_k is not None:
             if not -LIMIT_T <= last_k <= LIMIT_T or not c:
                 return None
