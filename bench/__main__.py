@@ -100,9 +100,9 @@ def main(argv: list[str] | None = None) -> int:
 
             results["gospa"] = gospa.run(quick=args.quick)
         elif name == "late":
-            from bench import late_data
+            from bench import late_data, late_e2e
 
-            results["late"] = late_data.run(quick=args.quick)
+            results["late"] = late_data.run(quick=args.quick) | late_e2e.run(quick=args.quick)
         elif name == "recording":
             from bench import recording_cost
 

@@ -92,29 +92,60 @@ class Scene:
             k += 1
 
 
+LATE_WARM_SCANS = 30  # scans sent in order before any is held back (the tracks' births and confirmation)
+LATE_MAX_SCANS = 25  # a held-back measurement goes out 1 to this many scans late (1.7 s: inside the 2 s window)
+
+
 class Prepared:
     """The first n_messages of a scene, encoded once, re-stamped in place before each blast:
     `restamp(t0_ns)` moves every t_ns by the same amount (msgpack uint64 after the "t_ns" key),
-    so the stream starts at t0_ns (the service's clock needs sensor times near arrival times)."""
+    so the stream starts at t0_ns (the service's clock needs sensor times near arrival times).
+    `late`: the fraction of measurements (after the first LATE_WARM_SCANS scans) sent late, each
+    after the scan 1 to LATE_MAX_SCANS scans after its own (uniform; seeded by `seed`), as
+    bench.late_data holds them back; the rest in time order."""
 
-    def __init__(self, n_targets: int, n_messages: int, *, seed: int) -> None:
+    def __init__(self, n_targets: int, n_messages: int, *, seed: int, late: float = 0.0) -> None:
         self.sensor: list[int] = []
         self.buf: list[bytearray] = []
         self.rel_ns: list[int] = []
         self.t0_ns = base = 1 << 60
+        scans: list[tuple[int, int, list[bytes]]] = []
+        n = 0
         for t, s, payloads in Scene(n_targets, seed).ticks(base):
-            take = payloads[: n_messages - len(self.buf)]
-            self.sensor.extend([s] * len(take))
-            self.buf.extend(bytearray(p) for p in take)
-            self.rel_ns.extend([t - base] * len(take))
-            if len(self.buf) >= n_messages:
+            take = payloads[: n_messages - n]
+            scans.append((t - base, s, take))
+            n += len(take)
+            if n >= n_messages:
                 break
+        for rel, s, payload in _arrival_order(scans, late, seed):
+            self.sensor.append(s)
+            self.buf.append(bytearray(payload))
+            self.rel_ns.append(rel)
         self.off = [b.index(b"\xa4t_ns\xcf") + 6 for b in self.buf]
 
     def restamp(self, t0_ns: int) -> None:
         for b, off, rel in zip(self.buf, self.off, self.rel_ns, strict=True):
             struct.pack_into(">Q", b, off, t0_ns + rel)
         self.t0_ns = t0_ns
+
+
+def _arrival_order(scans: list[tuple[int, int, list[bytes]]], late: float, seed: int
+                   ) -> list[tuple[int, int, bytes]]:
+    """(rel_ns, sensor, payload) in the order sent: each scan's measurements, then those held back
+    that are due after it (in the order they were held); what is due after the last scan last."""
+    rng = np.random.default_rng([seed, 7])
+    due: dict[int, list[tuple[int, int, bytes]]] = {}
+    out: list[tuple[int, int, bytes]] = []
+    for k, (rel, s, payloads) in enumerate(scans):
+        for p in payloads:
+            if late > 0.0 and k >= LATE_WARM_SCANS and rng.random() < late:
+                due.setdefault(k + int(rng.integers(1, LATE_MAX_SCANS + 1)), []).append((rel, s, p))
+            else:
+                out.append((rel, s, p))
+        out.extend(due.pop(k, []))
+    for k in sorted(due):
+        out.extend(due[k])
+    return out
 
 
 # ---- the publisher process -----------------------------------------------------------------------
@@ -136,7 +167,7 @@ def publisher_main(conn: Any, namespace: str) -> None:
             try:
                 if cmd == "prepare":
                     t = time.perf_counter()
-                    prepared = Prepared(arg["targets"], arg["messages"], seed=arg["seed"])
+                    prepared = Prepared(arg["targets"], arg["messages"], seed=arg["seed"], late=arg.get("late", 0.0))
                     reply: Any = {"encode_s": time.perf_counter() - t, "bytes": sum(len(p) for p in prepared.buf)}
                 elif cmd == "connect":
                     if session is not None:  # left open by a run that failed
@@ -186,9 +217,13 @@ def publisher_main(conn: Any, namespace: str) -> None:
             session.close()
 
 
-def _paced(pubs: list[Any], *, targets: int, seed: int, start_ns: int, duration_s: float) -> dict[str, Any]:
+def _paced(pubs: list[Any], *, targets: int, seed: int, start_ns: int, duration_s: float,
+           late: float = 0.0) -> dict[str, Any]:
     """Each scan as one burst at its due time (its t_ns, wall clock), for duration_s. Scans are
-    encoded a few ahead, right after a burst, never between a due time and its burst."""
+    encoded a few ahead, right after a burst, never between a due time and its burst. `late`:
+    the fraction of measurements held back (after LATE_WARM_SCANS scans) and sent at the end of
+    the burst of a scan 1 to LATE_MAX_SCANS scans later (as Prepared's); what is still held at
+    the end is not sent."""
     put = [p.put for p in pubs]
     end_ns = start_ns + round(duration_s * 1e9)
     ticks = Scene(targets, seed).ticks(start_ns)
@@ -196,14 +231,26 @@ def _paced(pubs: list[Any], *, targets: int, seed: int, start_ns: int, duration_
     late_ns: list[int] = []
     burst_ns: list[int] = []
     sent = 0
+    rng = np.random.default_rng([seed, 7])
+    due: dict[int, list[tuple[int, bytes]]] = {}
+    k = 0
     while ahead[0][0] < end_ns:
         t, s, payloads = ahead.popleft()
+        if late > 0.0 and k >= LATE_WARM_SCANS:
+            held = rng.random(len(payloads)) < late
+            for p in [p for p, h in zip(payloads, held.tolist(), strict=True) if h]:
+                due.setdefault(k + int(rng.integers(1, LATE_MAX_SCANS + 1)), []).append((s, p))
+            payloads = [p for p, h in zip(payloads, held.tolist(), strict=True) if not h]
         wait = (t - time.time_ns()) / 1e9
         if wait > 0:
             time.sleep(wait)
         b0 = time.time_ns()
         for p in payloads:
             put[s](p)
+        for s_late, p in due.get(k, ()):
+            put[s_late](p)
+        sent += len(due.pop(k, ()))
+        k += 1
         b1 = time.time_ns()
         late_ns.append(b0 - t)
         burst_ns.append(b1 - b0)

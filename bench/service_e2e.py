@@ -99,7 +99,8 @@ def throughput_run(pub: Publisher, folder: Path, *, n: int, targets: int, record
         else (c.applied - base.applied) / ((drained_wall - blast["t0_ns"]) / 1e9),
         "prime_s": prime_s, "unhandled_end": base.received + n - (c.received - c.queued),
         "received": c.received, "applied": c.applied,
-        "refused": dict(c.refused), "duplicates": c.duplicates, "replays": c.replays, "published": c.published,
+        "refused": dict(c.refused), "duplicates": c.duplicates, "replays": c.replays, "late_applied": c.late_applied,
+        "published": c.published,
         "estimates_seen": estimates[0], "counts_add_up": bad_counts == 0, "status_updates": len(snaps),
         "tracks": dict(last.tracks),
     }
@@ -111,7 +112,7 @@ def throughput_run(pub: Publisher, folder: Path, *, n: int, targets: int, record
 
 def latency_run(pub: Publisher, folder: Path, *, rate: int, recording: bool, duration_s: float,
                 grace_s: float, warm_s: float = 2.0, seed: int = 7,
-                recording_keys: dict[str, Any] | None = None) -> dict[str, Any]:
+                recording_keys: dict[str, Any] | None = None, late: float = 0.0) -> dict[str, Any]:
     got: list[tuple[int, bytes]] = []
     targets = round(rate / MSGS_PER_TARGET_S)
     folder.mkdir()
@@ -120,7 +121,8 @@ def latency_run(pub: Publisher, folder: Path, *, rate: int, recording: bool, dur
         pub.call("connect", svc.endpoint)
         _, base = prime(svc, pub, timeout_s=120.0)
         start_ns = time.time_ns() + 1_000_000_000
-        sent = pub.call("paced", {"targets": targets, "seed": seed, "start_ns": start_ns, "duration_s": duration_s},
+        sent = pub.call("paced", {"targets": targets, "seed": seed, "start_ns": start_ns, "duration_s": duration_s,
+                                  "late": late},
                         timeout_s=duration_s + 60.0)
         deadline = time.monotonic() + grace_s
         waited_from = sent["t1_ns"]

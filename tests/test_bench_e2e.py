@@ -53,17 +53,56 @@ def test_the_shipped_tracker_follows_every_target() -> None:
     true measurement outside the 0.999 gate starts a tentative track now and then)."""
     targets = 30
     p = Prepared(targets, targets * MSGS_PER_TARGET_S * 2, seed=5)  # 2 s
-    t0 = time.time_ns()
+    tracker, c = _through_the_shipped_tracker(p, batch=500)
+    assert c.applied == len(p.buf) and not c.refused
+    assert len(tracker.confirmed()) == targets and len(tracker.tracks) <= targets + 5
+
+
+def _through_the_shipped_tracker(p: Prepared, *, batch: int, t0: int | None = None) -> tuple[Tracker, m.Counts]:
+    """The prepared messages, stamped from t0 (now if None), through the shipped configuration's
+    pipeline in batches of `batch` samples in the order sent: the tracker and the pipeline's counts."""
+    t0 = time.time_ns() if t0 is None else t0
     p.restamp(t0)
     keys = [m.meas_key("demo", s) for s in ("radar1", "cam1")]
     records = [(t0 + rel, keys[s], bytes(b)) for s, b, rel in zip(p.sensor, p.buf, p.rel_ns, strict=True)]
     tracker = Tracker(load_service_config(CONFIG).tracker)
     pipe = Pipeline(tracker, wire.Codec("demo"))
-    for i in range(0, len(records), 500):
-        pipe.ingest(records[i:i + 500])
-    c = pipe.counts()
-    assert c.applied == len(records) and not c.refused
-    assert len(tracker.confirmed()) == targets and len(tracker.tracks) <= targets + 5
+    for i in range(0, len(records), batch):
+        pipe.ingest(records[i:i + batch])
+    return tracker, pipe.counts()
+
+
+def test_late_order_holds_back_a_tenth_within_25_scans() -> None:
+    """Prepared's `late`: the same messages; those after the first LATE_WARM_SCANS scans held back
+    with probability ~0.1 and sent after a scan 1 to LATE_MAX_SCANS scans later; the rest in
+    time order. Through the shipped tracker they give the tracks of the time order, bit for bit,
+    every one applied (none left the window)."""
+    from bench.e2e_load import LATE_MAX_SCANS, LATE_WARM_SCANS
+
+    targets, n = 20, 20 * MSGS_PER_TARGET_S * 6  # 6 s: 90 scans
+    a, b = Prepared(targets, n, seed=5), Prepared(targets, n, seed=5, late=0.1)
+    assert sorted(bytes(x) for x in a.buf) == sorted(bytes(x) for x in b.buf)
+    scan_times = sorted(set(a.rel_ns))
+    scan_of = {t: k for k, t in enumerate(scan_times)}
+    newest, held, backs = -1, 0, []
+    for rel in b.rel_ns:  # the scan each message belongs to, against the newest scan sent before it
+        k = scan_of[rel]
+        if k < newest:
+            held += 1
+            backs.append(newest - k)
+            assert k >= LATE_WARM_SCANS
+        newest = max(newest, k)
+    timed = sum(1 for rel in a.rel_ns if scan_of[rel] >= LATE_WARM_SCANS)
+    assert 0.07 < held / timed < 0.13, held / timed
+    assert min(backs) >= 1 and max(backs) <= LATE_MAX_SCANS
+    tracks = []
+    t0 = time.time_ns()
+    for p in (a, b):
+        tracker, c = _through_the_shipped_tracker(p, batch=50, t0=t0)
+        assert c.applied == len(p.buf) and not c.refused
+        ts = tracker.track_set
+        tracks.append((ts.ids.tobytes(), ts.X.tobytes(), ts.P.tobytes()))
+    assert tracks[0] == tracks[1] and c.late_applied > 0
 
 
 @pytest.mark.slow
@@ -80,3 +119,6 @@ def test_short_runs_against_a_real_service(tmp_path: Path) -> None:
         lat = latency_run(pub, tmp_path / "lat", rate=150, recording=False, duration_s=4.0, grace_s=30.0, warm_s=1.0)
         assert lat["kept_up"] and lat["coverage"] > 0.9, lat
         assert np.isfinite(lat["p50_ms"]) and lat["p50_ms"] <= lat["p99_ms"] <= lat["max_ms"]
+        late = latency_run(pub, tmp_path / "late", rate=150, recording=False, duration_s=4.0, grace_s=30.0,
+                           warm_s=1.0, late=0.1)  # held back after 2 s (LATE_WARM_SCANS)
+        assert late["kept_up"] and not late["refused"] and late["sent"] < lat["sent"], late
