@@ -13,7 +13,7 @@ from fusion.core.compiled_stack import innovate_many
 from fusion.core.imm_stack import StepCache, predict_imm
 from fusion.core.modes import Mode, build_imm
 from fusion.tracking.gating import Measured
-from fusion.tracking.id_sets import member, rerun_sets
+from fusion.tracking.id_sets import NUMPY_SORT_FROM, member, rerun_sets
 from fusion.tracking.lifecycle_kernel import COASTED, COVARIANCE, MISSES, NOT_CONFIRMED, verdicts
 from fusion.tracking.trackset import Layout, Rows, TrackSet
 
@@ -161,31 +161,36 @@ def _rerun_sets_reference(old_ids, old_seqs, ts_ids, changed, gone, add_ids, add
     return new_ids, nseqs, rows, js, i[o], j[o]
 
 
+@pytest.mark.parametrize("size", [(40, 50, 70, 8), (700, 800, 1500, 60)], ids=["few-pairs", "many-pairs"])
 @pytest.mark.parametrize("seed", range(12))
-def test_rerun_sets_are_the_steps_they_replaced(seed: int) -> None:
-    """A stored run's pairs over 40 tracks and 50 detections; some tracks changed, some gone,
-    new detections, added pairs of the changed tracks and new detections."""
+def test_rerun_sets_are_the_steps_they_replaced(seed: int, size: tuple[int, int, int, int]) -> None:
+    """A stored run's pairs over T tracks and D detections (up to E pairs; the 5 last detections
+    new), some tracks changed, some gone, new detections, up to A added pairs of the changed
+    tracks and new detections. Few pairs: rerun_sets sorts the ids compiled; many (beyond
+    id_sets.NUMPY_SORT_FROM): with numpy's sort."""
+    T, D, E_max, A_max = size
     rng = np.random.default_rng(seed)
-    before = rng.choice(2**62, 40, replace=False).astype(np.int64)
-    seqs = np.sort(rng.choice(10**6, 50, replace=False)).astype(np.int64)
-    E = int(rng.integers(0, 70))
-    old_ids, old_seqs = before[rng.integers(0, 40, E)], seqs[rng.integers(0, 45, E)]  # the last 5 detections new
+    before = rng.choice(2**62, T, replace=False).astype(np.int64)
+    seqs = np.sort(rng.choice(10**6, D, replace=False)).astype(np.int64)
+    E = int(rng.integers(E_max // 2 if T > 100 else 0, E_max))
+    old_ids, old_seqs = before[rng.integers(0, T, E)], seqs[rng.integers(0, D - 5, E)]  # the last 5 detections new
     pairs = np.unique(np.stack([old_ids, old_seqs], axis=1), axis=0)
     old_ids, old_seqs = pairs[:, 0].copy(), pairs[:, 1].copy()
-    gone_mask = rng.random(40) < 0.1
+    gone_mask = rng.random(T) < 0.1
     ts_ids = np.concatenate([before[~gone_mask], rng.choice(2**62, 2).astype(np.int64)])  # two born since
     changed = rng.random(ts_ids.size) < 0.15
     changed[-2:] = True  # tracks the stored run did not have are changed
-    new = np.zeros(50, dtype=bool)
-    new[45:] = rng.random(5) < 0.6
-    A = int(rng.integers(0, 8))
-    add = np.unique(np.stack([ts_ids[changed][rng.integers(0, changed.sum(), A)], seqs[rng.integers(0, 50, A)]],
+    new = np.zeros(D, dtype=bool)
+    new[D - 5:] = rng.random(5) < 0.6
+    A = int(rng.integers(0, A_max))
+    add = np.unique(np.stack([ts_ids[changed][rng.integers(0, changed.sum(), A)], seqs[rng.integers(0, D, A)]],
                              axis=1), axis=0)
     add_ids, add_seqs = add[:, 0].copy(), add[:, 1].copy()
     drop = np.concatenate([ts_ids[changed], before[gone_mask]])
     got = rerun_sets(old_ids, old_seqs, drop, add_ids, add_seqs, seqs[new], ts_ids, seqs)
     want = _rerun_sets_reference(old_ids, old_seqs, ts_ids, changed, before[gone_mask], add_ids, add_seqs, seqs[new],
                                  seqs)
+    assert (old_ids.size + add_ids.size >= NUMPY_SORT_FROM) == (T > 100)
     assert _bits(*got) == _bits(*(np.asarray(w).astype(np.int64) for w in want))
 
 
