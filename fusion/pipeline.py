@@ -22,7 +22,6 @@ is every sample handed to `ingest` and duplicates are refusals with reason "dupl
 from __future__ import annotations
 
 import dataclasses
-import itertools
 import logging
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
@@ -201,29 +200,39 @@ class Pipeline:
             self.gaps.add_many(sensor, epochs, seqs)
         self._pending.clear()
 
-    def ingest(self, records: Sequence[Record], *, more: bool = False, prune: bool = True) -> Output:
-        """Process samples in arrival order (after the measurements held from the last call); return
-        the tracker's result and what to publish. With `more`, the batch's last scan waits for the
-        next call (see the module docstring). With prune=False the caller calls `prune` itself,
-        after publishing (the service: see `prune`)."""
-        dets: list[Detection | ControlInput] = list(self._held)
-        self._held = []
-        decode, checked, route = self._decode, self._checked, self._route
-        routes = [route(key) for _, key, _ in records]
-        # every measurement's payload decoded in one loop (Codec.detections); a None there, and
-        # every other kind of sample, goes the one-sample way, so refusals are those of _decode
+    def decoded(self, records: Sequence[Record]) -> list[Detection | None]:
+        """Each record's measurement decoded in one loop (Codec.detections), None for the other
+        kinds and where the loop could not convert a payload (ingest decodes those alone, with
+        their errors): what `ingest(records, decoded=...)` takes. It changes nothing `ingest`
+        counts, so a service decodes a burst's samples while the rest of it arrives."""
+        routes = [self._route(key) for _, key, _ in records]
         try:
             fast = iter(self.codec.detections((r[0], r[2]) for r, rt in zip(records, routes, strict=True)
                                               if rt[0] == "meas"))
         except Exception as exc:  # a decoder bug: said, then each sample decoded alone (its errors are _decode's)
             self.warn.warn("batch_decode", "batch decode failed (%s: %s); decoding the batch's %d samples one by one",
                            type(exc).__name__, exc, len(records))
-            fast = itertools.repeat(None)
+            return [None] * len(records)
+        return [next(fast) if rt[0] == "meas" else None for rt in routes]
+
+    def ingest(self, records: Sequence[Record], *, more: bool = False, prune: bool = True,
+               decoded: Sequence[Detection | None] | None = None) -> Output:
+        """Process samples in arrival order (after the measurements held from the last call); return
+        the tracker's result and what to publish. With `more`, the batch's last scan waits for the
+        next call (see the module docstring). With prune=False the caller calls `prune` itself,
+        after publishing (the service: see `prune`). `decoded`: `decoded(records)`, if the caller
+        made it (one item per record)."""
+        dets: list[Detection | ControlInput] = list(self._held)
+        self._held = []
+        decode, checked, route = self._decode, self._checked, self._route
+        if decoded is None:
+            decoded = self.decoded(records)
+        elif len(decoded) != len(records):
+            raise ValueError(f"{len(decoded)} decoded measurements for {len(records)} records")
         self._received += len(records)
         try:
-            for (arrival_ns, key, payload), (kind, key_id) in zip(records, routes, strict=True):
-                d = next(fast) if kind == "meas" else None
-                d = decode(arrival_ns, key, payload) if d is None else checked(d, key, key_id, arrival_ns)
+            for (arrival_ns, key, payload), d in zip(records, decoded, strict=True):
+                d = decode(arrival_ns, key, payload) if d is None else checked(d, key, route(key)[1], arrival_ns)
                 if d is not None:
                     dets.append(d)
         finally:

@@ -56,7 +56,7 @@ from fusion.io.zenoh_publishers import KeyedPublishers
 from fusion.pipeline import Pipeline, Record
 from fusion.prediction import Cadence, encode_predicted, predicted_key
 from fusion.snapshot_answers import SnapshotAnswers
-from fusion.tracking.detection import Reason
+from fusion.tracking.detection import Detection, Reason
 from fusion.tracking.results import Counts, Estimate
 from fusion.tracking.tracker import Tracker
 from fusion.tracking.trackset import Status
@@ -239,19 +239,25 @@ class Service:
     def _drain(self, limit: int) -> list[Record]:
         return self._q.drain(limit)
 
-    def _drain_burst(self, limit: int) -> Drained:
+    def _drain_burst(self, limit: int) -> tuple[Drained, list[Detection | None]]:
         """A batch that takes the rest of a burst still arriving, and whether it was cut before
-        the burst's end (fusion.io.burst)."""
+        the burst's end (fusion.io.burst); and its measurements, decoded part by part while the
+        rest of the burst arrived (Pipeline.decoded)."""
         ic = self.config.intake
-        return drain_burst(self._q, self._wake, limit, gap_s=ic.burst_gap_ms / 1e3, linger_s=ic.burst_linger_ms / 1e3)
+        decoded: list[Detection | None] = []
+        drained = drain_burst(self._q, self._wake, limit, gap_s=ic.burst_gap_ms / 1e3,
+                              linger_s=ic.burst_linger_ms / 1e3,
+                              on_chunk=lambda chunk: decoded.extend(self.pipeline.decoded(chunk)))
+        return drained, decoded
 
-    def _step(self, batch: list[Record], *, more: bool = False) -> None:
+    def _step(self, batch: list[Record], *, more: bool = False, decoded: list[Detection | None] | None = None) -> None:
         """One batch: to the stream file, through the pipeline (`more`: a backlog follows, so the
-        batch's last scan waits for its rest: fusion.pipeline), out to Zenoh; then the publication
-        view pruned (Pipeline.prune: freeing what it forgets is no longer paid before publishing)."""
+        batch's last scan waits for its rest: fusion.pipeline; `decoded`: its measurements, if
+        decoded already), out to Zenoh; then the publication view pruned (Pipeline.prune: freeing
+        what it forgets is no longer paid before publishing)."""
         if self.stream is not None:
             self.stream.write_many(batch)
-        out = self.pipeline.ingest(batch, more=more, prune=False)  # pruned once the batch is out (below)
+        out = self.pipeline.ingest(batch, more=more, prune=False, decoded=decoded)  # pruned once out (below)
         self._processed += len(batch)
         enc = wire.estimate_encoder(self.tracker.layout, self.tracker.model_name)
         BLOCK = self._zenoh.CongestionControl.BLOCK
@@ -301,9 +307,9 @@ class Service:
                     break
                 if self._writer is not None and self._q:
                     self._writer.loop_busy()  # the recording's thread waits for the loop's next pause
-                batch, cut = self._drain_burst(batch_max)
+                (batch, cut), decoded = self._drain_burst(batch_max)
                 if batch:
-                    self._step(batch, more=cut and bool(self._q))  # a cut burst's last scan waits for its rest
+                    self._step(batch, more=cut and bool(self._q), decoded=decoded)  # a cut burst's last scan waits
                     if not self._q:  # caught up: make the status answer current at once
                         self._refresh_status(force=True)
                         self._settled = self._processed + self._q.refused_total

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import threading
 import time
+from collections.abc import Callable
 from typing import NamedTuple
 
 from fusion.io.intake_queue import IntakeQueue, Record
@@ -38,11 +39,16 @@ class Drained(NamedTuple):
     cut: bool
 
 
-def drain_burst(q: IntakeQueue, wake: threading.Event, limit: int, *, gap_s: float, linger_s: float) -> Drained:
+def drain_burst(q: IntakeQueue, wake: threading.Event, limit: int, *, gap_s: float, linger_s: float,
+                on_chunk: Callable[[list[Record]], None] | None = None) -> Drained:
     """The oldest `limit` samples of `q`, including those of a burst still arriving (module
     docstring). `wake` is set by the producer when it queues a sample; it is cleared here before
-    each look at the queue, so a sample queued after the look sets it again."""
+    each look at the queue, so a sample queued after the look sets it again. `on_chunk` is
+    called with each part of the batch as it is drained, in order, before waiting for the
+    rest: work on the samples there is done while the burst still arrives."""
     batch = q.drain(limit)
+    if batch and on_chunk is not None:
+        on_chunk(batch)
     if not batch or linger_s <= 0.0 or gap_s <= 0.0:
         return Drained(batch, len(batch) >= limit)
     end = time.monotonic() + linger_s
@@ -57,5 +63,8 @@ def drain_burst(q: IntakeQueue, wake: threading.Event, limit: int, *, gap_s: flo
             # first may have queued the burst's next samples meanwhile): the burst is over,
             # unless the linger cut this wait short of gap_s
             return Drained(batch, left < gap_s)
-        batch.extend(q.drain(limit - len(batch)))
+        more = q.drain(limit - len(batch))
+        if more and on_chunk is not None:
+            on_chunk(more)
+        batch.extend(more)
     return Drained(batch, True)

@@ -38,7 +38,7 @@ def producer(q: IntakeQueue, wake: threading.Event, parts: list[int], pause_s: f
     return t
 
 
-def first_batch(q: IntakeQueue, wake: threading.Event, **kw: float) -> Drained:
+def first_batch(q: IntakeQueue, wake: threading.Event, **kw: object) -> Drained:
     """What drain_burst returns once the first sample is there."""
     assert wake.wait(5.0)
     return drain_burst(q, wake, kw.pop("limit", 10_000), **kw)  # type: ignore[arg-type]
@@ -53,6 +53,20 @@ def test_a_burst_with_pauses_shorter_than_the_gap_is_one_batch() -> None:
     assert len(batch) == 601 and not cut  # ended by the quiet after it
     assert [int.from_bytes(r[2], "little") for r in batch] == list(range(601))  # in arrival order
     assert len(q) == 0
+
+
+def test_on_chunk_sees_each_part_as_it_is_drained() -> None:
+    """on_chunk is called with the batch's parts in order (the first drain, then what each look
+    after a pause found), before the wait for the rest: their concatenation is the batch."""
+    q, wake = queue(), threading.Event()
+    t = producer(q, wake, [1, 300, 300], pause_s=0.05)
+    t.start()
+    parts: list[list[int]] = []
+    batch, cut = first_batch(q, wake, gap_s=0.2, linger_s=5.0,
+                             on_chunk=lambda chunk: parts.append([int.from_bytes(r[2], "little") for r in chunk]))
+    t.join()
+    assert len(batch) == 601 and not cut
+    assert len(parts) >= 3 and [i for p in parts for i in p] == list(range(601))  # a part per pause at least
 
 
 def test_a_pause_longer_than_the_gap_ends_the_batch() -> None:
