@@ -44,27 +44,32 @@ def drain_burst(q: IntakeQueue, wake: threading.Event, limit: int, *, gap_s: flo
     """The oldest `limit` samples of `q`, including those of a burst still arriving (module
     docstring). `wake` is set by the producer when it queues a sample; it is cleared here before
     each look at the queue, so a sample queued after the look sets it again. `on_chunk` is
-    called with each part of the batch as it is drained, in order, before waiting for the
-    rest: work on the samples there is done while the burst still arrives."""
+    called with each part of the batch as it is drained, in order, before looking for the rest;
+    the quiet gap_s that ends a burst is counted from the look that found the part, so the work
+    done there overlaps the wait (a part's samples decoded while the burst's end is awaited)."""
     batch = q.drain(limit)
+    found = time.monotonic()  # the last look that found samples
+    end = found + linger_s
     if batch and on_chunk is not None:
         on_chunk(batch)
     if not batch or linger_s <= 0.0 or gap_s <= 0.0:
         return Drained(batch, len(batch) >= limit)
-    end = time.monotonic() + linger_s
     while len(batch) < limit:
-        left = end - time.monotonic()
+        now = time.monotonic()
+        left, quiet = end - now, gap_s - (now - found)  # the linger left; the gap left since the last find
         if left <= 0.0:
             return Drained(batch, True)  # samples still coming when the linger ran out
         wake.clear()
-        if not len(q) and not wake.wait(min(gap_s, left)) and not len(q):
-            # nothing for gap_s, and nothing queued by the time this thread runs again (a wait's
-            # timeout is seen only once it holds the GIL again, and a callback holding the GIL
-            # first may have queued the burst's next samples meanwhile): the burst is over,
-            # unless the linger cut this wait short of gap_s
-            return Drained(batch, left < gap_s)
+        if not len(q) and (quiet <= 0.0 or not wake.wait(min(quiet, left))) and not len(q):
+            # nothing for gap_s since the last find, and nothing queued by the time this thread
+            # runs again (a wait's timeout is seen only once it holds the GIL again, and a
+            # callback holding the GIL first may have queued the burst's next samples
+            # meanwhile): the burst is over, unless the linger cut this wait short of the gap
+            return Drained(batch, left < quiet)
         more = q.drain(limit - len(batch))
-        if more and on_chunk is not None:
-            on_chunk(more)
+        if more:
+            found = time.monotonic()
+            if on_chunk is not None:
+                on_chunk(more)
         batch.extend(more)
     return Drained(batch, True)

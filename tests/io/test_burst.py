@@ -69,6 +69,28 @@ def test_on_chunk_sees_each_part_as_it_is_drained() -> None:
     assert len(parts) >= 3 and [i for p in parts for i in p] == list(range(601))  # a part per pause at least
 
 
+def test_the_gap_is_counted_from_the_look_that_found_samples() -> None:
+    """Work done in on_chunk overlaps the wait for the burst's end: a part whose work outlasts
+    the gap ends the batch as soon as the work is done and nothing more came (not a whole gap
+    later); samples that came during the work are found and stay in the batch."""
+    q, wake = queue(), threading.Event()
+    t = producer(q, wake, [1, 300], pause_s=0.05)
+    t.start()
+    calls: list[int] = []
+
+    def work(chunk: list) -> None:
+        calls.append(len(chunk))
+        time.sleep(0.6)
+
+    assert wake.wait(5.0)
+    t0 = time.monotonic()
+    batch, cut = drain_burst(q, wake, 10_000, gap_s=0.5, linger_s=30.0, on_chunk=work)
+    took = time.monotonic() - t0
+    t.join()
+    assert len(batch) == 301 and not cut and calls[0] == 1 and sum(calls) == 301
+    assert took < 0.6 * len(calls) + 0.35, (took, calls)  # a gap counted after the work: >= 0.6 n + 0.5
+
+
 def test_a_pause_longer_than_the_gap_ends_the_batch() -> None:
     q, wake = queue(), threading.Event()
     t = producer(q, wake, [200, 200], pause_s=0.5)
