@@ -27,7 +27,7 @@ import fusion.tracking.tracker as tracker_module
 from fusion.config import TrackerConfig, load_service_config
 from fusion.tracking.results import REVIEW_ROWS, Estimate
 from fusion.tracking.tracker import Tracker
-from fusion.tracking.trackset import ROW_FIELDS
+from fusion.tracking.trackset import ROW_FIELDS, Rows, TrackSet
 from tests.tracking.streams import CLUTTER, Labeled, Sensor, constant_velocity, detect, in_order
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -209,3 +209,44 @@ def test_changed_since_compares_bits_and_follows_ids() -> None:
     assert other.changed_since(ts, among=ts.ids[[1]]).tolist() == [i == 1 for i in range(n)]
     fewer = ts.take(np.arange(1, n))
     assert ts.changed_since(fewer).tolist() == [i == 0 for i in range(n)]  # a track the old set lacks
+
+
+@pytest.mark.parametrize("n", [5, 40], ids=["few-rows", "many-rows"])
+def test_changed_since_finds_one_bit_in_any_column(n: int) -> None:
+    """n random rows of the shipped layout (few: compared one by one; many: in a compiled call);
+    one bit flipped in one row of one column at a time is that row changed, and no other (a
+    bool flipped as a value); -0.0 against 0.0 is a change, the same NaN is not; the same rows
+    in another order are unchanged, and `among` limits what is compared."""
+    layout = Tracker(shipped()).track_set.layout
+    rng = np.random.default_rng(n)
+    empty = Rows.empty(layout)
+    cols = {}
+    for f in ROW_FIELDS:
+        e = getattr(empty, f)
+        if e is not None:
+            shape = (n, *e.shape[1:])
+            cols[f] = (rng.random(shape) < 0.5 if e.dtype == bool else rng.standard_normal(shape)
+                       if e.dtype.kind == "f" else rng.integers(0, 100, shape).astype(e.dtype))
+    cols["ids"] = rng.choice(2**62, n, replace=False).astype(np.int64)
+    cols["X"][:, 0] = 0.0
+    cols["P"][:, 0, 0] = np.nan
+    base = TrackSet(Rows(**{f: cols.get(f) for f in ROW_FIELDS}), layout)
+    assert not base.changed_since(base.take(np.arange(n)[::-1])).any()
+    copy = TrackSet(Rows(**{f: None if f not in cols else cols[f].copy() for f in ROW_FIELDS}), layout)
+    assert not copy.changed_since(base).any()  # the same bits (the NaNs too) in other arrays
+    for f in [f for f in cols if f != "ids"]:
+        r = int(rng.integers(n))
+        mod = {g: c.copy() for g, c in cols.items()}
+        if mod[f].dtype == bool:
+            mod[f][r].flat[0] = not mod[f][r].flat[0]
+        else:
+            flat = mod[f][r:r + 1].view(np.uint8).reshape(-1)
+            flat[int(rng.integers(flat.size))] ^= np.uint8(1 << int(rng.integers(8)))
+        ts = TrackSet(Rows(**{g: mod.get(g) for g in ROW_FIELDS}), layout)
+        assert ts.changed_since(base).tolist() == [i == r for i in range(n)], f
+        others = np.delete(cols["ids"], r)
+        assert not ts.changed_since(base, among=others).any(), f
+    neg = {g: c.copy() for g, c in cols.items()}
+    neg["X"][n - 1, 0] = -0.0
+    ts = TrackSet(Rows(**{g: neg.get(g) for g in ROW_FIELDS}), layout)
+    assert ts.changed_since(base).tolist() == [i == n - 1 for i in range(n)]
