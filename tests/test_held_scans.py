@@ -78,8 +78,8 @@ def test_the_service_holds_a_cut_scan_only_with_a_backlog_and_its_counts_add_up(
     with running_service(cfg, tmp_path) as (svc, endpoint):
         step = svc._step
 
-        def probe(batch, *, more=False):  # on the loop's thread, after each batch
-            step(batch, more=more)
+        def probe(batch, *, more=False, decoded=None):  # on the loop's thread, after each batch
+            step(batch, more=more, decoded=decoded)
             seen.append((more, svc.pipeline.holding, svc.status_dict()["counts"]))
 
         svc._step = probe  # type: ignore[method-assign]
