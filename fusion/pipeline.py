@@ -11,6 +11,10 @@ service feeds it batches drained from its intake queue; `fusion replay` feeds it
 records read back from a stream file. Admission is
 decided one sample at a time in arrival order (the arrival time feeds the tracker's clock), so
 a replay reproduces the live run's estimates exactly, however the records are batched.
+`decoded(records)` decodes the measurements' payloads alone (it counts nothing): the live
+service calls it on each part of a burst as it is drained, while the rest arrives, and hands
+the result to `ingest(records, decoded=...)`, which checks, counts and refuses as it would
+have had it decoded them itself.
 
 A measurement must come on its own sensor's key (`.../meas/<sensor_id>`), truth on its own
 target's key: anyone who may publish on one key cannot speak for another sensor.
