@@ -150,9 +150,8 @@ class Rows:
         matched[m_idx] = True
         cols = EstimateColumns.of(E_)
         nis_dof = rv.width("y")
-        ids = cols.ids.tolist()
-        rec.extend(t, step, arr, track=ids, label=[short_id(i) for i in ids], sensor=cols.sensor.tolist(),
-                   seq=[e.seq for e in E_], status=status, revision=[e.revision for e in E_],
+        rec.extend(t, step, arr, track=cols.ids, label=list(map(short_id, cols.ids.tolist())),
+                   sensor=cols.sensor.tolist(), seq=cols.seq, status=status, revision=cols.revision,
                    blocks={"x": X, "std": std, "error": err}, nis=cols.nis, nis_dof=nis_dof,
                    nees=nees, nees_dof=np.where(matched, len(self.ki), 0), target=target.tolist())
         W = derive.world(X[:, self.pi])
@@ -165,14 +164,15 @@ class Rows:
             if mask.any():
                 sink.col(entity, "points", rgba=colour(role), radius=radius).extend(
                     t[mask], step[mask], arr[mask], p=W[mask][:, None, :])
-        self._set_distances(sink, t, step, arr, W, conf, ids)
+        self._set_distances(sink, t, step, arr, W, conf, cols.ids.tolist())
         kept = self.choice.kept_ids()
         sel = np.flatnonzero(conf & np.isin(cols.ids, kept)) if kept else np.empty(0, np.int64)
         if not sel.size:
             return None
-        return Stacked.of([E_[i] for i in sel.tolist()], t[sel], step[sel], arr[sel], X[sel], P[sel], std[sel],
-                          err[sel], matched[sel], nees[sel], TX_full(TX, m_idx, X.shape)[sel], W[sel], conf=conf[sel],
-                          n_pos=len(self.pi), blocks=rv.subset(sel), columns=cols.take(sel))
+        return Stacked.of([E_[i] for i in sel.tolist()], t[sel], step[sel], arr[sel], X[sel],
+                          P[sel][:, self.pi][:, :, self.pi], std[sel], err[sel], matched[sel], nees[sel],  # Pp: _cursor
+                          TX_full(TX, m_idx, X.shape)[sel], W[sel], conf=conf[sel], n_pos=len(self.pi),
+                          blocks=rv.subset(sel), columns=cols.take(sel))
 
     def views(self, batches: list[Stacked], sink: Any, *, pause: Callable[[], None]) -> None:
         """The viewed tracks' time series and cursor marks, from their rows of the record flushes
@@ -307,7 +307,7 @@ class Rows:
         self._last[tid] = (int(t[-1]), int(step[-1]), int(arr[-1]), W[-1].copy())
         sink.col(f"{w}/now", "points", rgba=colour("estimate"), radius=-5.0, show_labels=True).extend(
             t, step, arr, p=W[:, None, :], label=[[lab]] * len(rows))
-        Pp = c.P[rows][:, self.pi][:, :, self.pi]
+        Pp = c.Pp[rows]
         pos = c.X[rows][:, self.pi]
         keep: list[int] = []
         if len(self.pi) > 1:

@@ -1,6 +1,7 @@
 """The viewed tracks' rows between a record flush and the view flush that draws them
 (fusion.io.track_rows: `Rows.score` makes them, `Rows.views` reads them), as stacked arrays of
-their own: the scored rows (times, x, P, sqrt(diag P), error, NEES, matched truth, world
+their own: the scored rows (times, x, the position block of P (Pp: what the views draw of
+P, a sixth of it for a 5-component state), sqrt(diag P), error, NEES, matched truth, world
 position) and what the views read of the estimates, stacked when the rows are scored, in one
 pass over the estimates:
 
@@ -30,7 +31,7 @@ from fusion.tracking.results import Estimate, Review
 
 # Updates' per-row blocks after `rows`, and Stacked's per-row arrays: positional, then keyword
 _UPDATE_BLOCKS = ("Y", "S", "nis", "gain", "K")
-_POSITIONAL = ("t", "step", "arr", "X", "P", "std", "err", "matched", "nees", "TX", "W")
+_POSITIONAL = ("t", "step", "arr", "X", "Pp", "std", "err", "matched", "nees", "TX", "W")
 _KEYWORD = ("ids", "conf", "prior", "meas", "meas_pos", "mode")
 
 
@@ -70,12 +71,15 @@ def _filled(present: Array, values: Sequence[Array | None], shape: tuple[int, ..
 
 class EstimateColumns(NamedTuple):
     """What a flush reads of each estimate beside its arrays, as columns: track id (n,) int64,
-    NIS (n,) float64 (NaN where there is none), whether it has one (n,) bool, sensor (n,) object."""
+    NIS (n,) float64 (NaN where there is none), whether it has one (n,) bool, sensor (n,) object,
+    the seq and revision (n,) int64."""
 
     ids: Array
     nis: Array
     has_nis: Array
     sensor: Array
+    seq: Array
+    revision: Array
 
     @classmethod
     def of(cls, estimates: Sequence[Estimate]) -> EstimateColumns:
@@ -83,22 +87,26 @@ class EstimateColumns(NamedTuple):
         niss = list(map(attrgetter("nis"), estimates))
         return cls(np.fromiter(map(attrgetter("track_id"), estimates), dtype=np.int64, count=n),
                    np.array(niss, dtype=np.float64), _present(niss),  # None (a birth's) as NaN
-                   np.array(list(map(attrgetter("sensor_id"), estimates)), dtype=object))
+                   np.array(list(map(attrgetter("sensor_id"), estimates)), dtype=object),
+                   np.fromiter(map(attrgetter("seq"), estimates), dtype=np.int64, count=n),
+                   np.fromiter(map(attrgetter("revision"), estimates), dtype=np.int64, count=n))
 
     def take(self, rows: Array) -> EstimateColumns:
-        return EstimateColumns(self.ids[rows], self.nis[rows], self.has_nis[rows], self.sensor[rows])
+        return EstimateColumns(*(c[rows] for c in self))
 
 
 class ReviewBlocks:
     """The distinct Review blocks of some estimates (fusion.tracking.results.Review: a scan's
     estimates share theirs) and each estimate's block and row in it."""
 
-    __slots__ = ("_flat", "blocks", "row", "which")
+    __slots__ = ("_fields", "_flat", "blocks", "row", "which")
 
     def __init__(self, blocks: list[Review | None], which: Array, row: Array,
-                 flat: dict[tuple[str, int | None], tuple[Array, Array]] | None = None) -> None:
+                 flat: dict[tuple[str, int | None], tuple[Array, Array]] | None = None,
+                 fields: dict[str, tuple[list[Array | None], Array]] | None = None) -> None:
         self.blocks, self.which, self.row = blocks, which, row
         self._flat = {} if flat is None else flat  # (field, cut): the blocks concatenated, each block's offset
+        self._fields = {} if fields is None else fields  # field: each block's array of it, and whether it has one
 
     @classmethod
     def of(cls, estimates: Sequence[Estimate]) -> ReviewBlocks:
@@ -111,16 +119,22 @@ class ReviewBlocks:
 
     def subset(self, rows: Array) -> ReviewBlocks:
         """The same for the estimates `rows` (indices)."""
-        return ReviewBlocks(self.blocks, self.which[rows], self.row[rows], self._flat)  # the same blocks
+        return ReviewBlocks(self.blocks, self.which[rows], self.row[rows], self._flat, self._fields)  # the same blocks
 
-    def _arrays(self, name: str) -> list[Array | None]:
-        """Each block's field `name` (None where there is no block, or it has not that field)."""
-        return [None if b is None else getattr(b, name) for b in self.blocks]
+    def _arrays(self, name: str) -> tuple[list[Array | None], Array]:
+        """Each block's field `name` (None where there is no block, or it has not that field), and
+        whether each block has it: read once per field, for this set of blocks and its subsets
+        (a flush asks `has` and `take` of the same field several times)."""
+        got = self._fields.get(name)
+        if got is None:
+            arrays = [None if b is None else getattr(b, name) for b in self.blocks]
+            got = self._fields[name] = (arrays, np.array([a is not None for a in arrays], dtype=bool))
+        return got
 
     def width(self, name: str) -> Array:
         """(n,) int64: the length of each estimate's row of the field (its block's second axis; 0
         where it has none): the innovation's dimension, of "y"."""
-        w = np.array([0 if a is None else a.shape[1] for a in self._arrays(name)], dtype=np.int64)
+        w = np.array([0 if a is None else a.shape[1] for a in self._arrays(name)[0]], dtype=np.int64)
         return w[self.which]
 
     def rows_of(self, name: str, estimates: Sequence[Estimate], attr: str) -> Array:
@@ -133,8 +147,7 @@ class ReviewBlocks:
 
     def has(self, name: str) -> Array:
         """(n,) bool: whether each estimate's block has the field."""
-        h = np.array([a is not None for a in self._arrays(name)], dtype=bool)
-        return h[self.which]
+        return self._arrays(name)[1][self.which]
 
     def take(self, name: str, at: Array, *, cut: int | None = None) -> Array:
         """The field's rows of the estimates `at` (each with the field), stacked (a new array):
@@ -142,7 +155,7 @@ class ReviewBlocks:
         blocks and its subsets), then the rows picked."""
         got = self._flat.get((name, cut))
         if got is None:
-            arrays = self._arrays(name)
+            arrays = self._arrays(name)[0]
             rows = np.fromiter([0 if a is None else len(a) for a in arrays], dtype=np.int64, count=len(arrays))
             off = np.cumsum(rows) - rows  # each block's first row in the concatenation
             parts = [a if cut is None else a[:, :cut] for a in arrays if a is not None]
@@ -155,26 +168,26 @@ class Stacked:
     """The viewed tracks' rows of one record flush (or of several, concatenated): see the module
     docstring. `ids` (n,) int64 track ids; `conf` (n,) whether each is confirmed."""
 
-    __slots__ = ("P", "TX", "W", "X", "arr", "conf", "err", "ids", "matched", "meas", "meas_pos", "mode", "mu",
+    __slots__ = ("Pp", "TX", "W", "X", "arr", "conf", "err", "ids", "matched", "meas", "meas_pos", "mode", "mu",
                  "nees", "prior", "std", "step", "t", "updates")
 
-    def __init__(self, t: Array, step: Array, arr: Array, X: Array, P: Array, std: Array, err: Array,
+    def __init__(self, t: Array, step: Array, arr: Array, X: Array, Pp: Array, std: Array, err: Array,
                  matched: Array, nees: Array, TX: Array, W: Array, *, ids: Array, conf: Array, prior: Array,
                  meas: Array, meas_pos: Array, mode: Array, mu: Array | None, updates: dict[str, Updates]) -> None:
-        self.t, self.step, self.arr, self.X, self.P, self.std = t, step, arr, X, P, std
+        self.t, self.step, self.arr, self.X, self.Pp, self.std = t, step, arr, X, Pp, std
         self.err, self.matched, self.nees, self.TX, self.W = err, matched, nees, TX, W
         self.ids, self.conf, self.prior, self.meas, self.meas_pos = ids, conf, prior, meas, meas_pos
         self.mode, self.mu, self.updates = mode, mu, updates
 
     @classmethod
-    def of(cls, estimates: list[Estimate], t: Array, step: Array, arr: Array, X: Array, P: Array, std: Array,
+    def of(cls, estimates: list[Estimate], t: Array, step: Array, arr: Array, X: Array, Pp: Array, std: Array,
            err: Array, matched: Array, nees: Array, TX: Array, W: Array, *, conf: Array, n_pos: int,
            blocks: ReviewBlocks | None = None, columns: EstimateColumns | None = None) -> Stacked:
         """The rows of `estimates` (the arrays' rows, in their order; every array a copy of its
-        own), with the first `n_pos` components of their measured positions. What the
-        estimates' Review blocks hold is read block by block (`blocks`, theirs, or found here),
-        not estimate by estimate, and their ids, NIS and sensors from `columns` (theirs, or
-        read here)."""
+        own; `Pp` their covariances' position blocks, (n, k, k)), with the first `n_pos`
+        components of their measured positions. What the estimates' Review blocks hold is read
+        block by block (`blocks`, theirs, or found here), not estimate by estimate, and their
+        ids, NIS and sensors from `columns` (theirs, or read here)."""
         d = X.shape[1]
         E = estimates
         mus = list(map(attrgetter("mode_probabilities"), E))
@@ -210,7 +223,7 @@ class Stacked:
                 H, Pm = rv.take("H", ks[gain]), rv.take("prior_P", ks[gain])
                 K[gain] = np.swapaxes(np.linalg.solve(S[gain], H @ Pm), 1, 2)  # P- H' S^-1, S symmetric
             updates[sensor] = Updates(ks, Y, S, cols.nis[ks], gain, K)
-        return cls(t, step, arr, X, P, std, err, matched, nees, TX, W, ids=cols.ids, conf=conf, prior=prior, meas=meas,
+        return cls(t, step, arr, X, Pp, std, err, matched, nees, TX, W, ids=cols.ids, conf=conf, prior=prior, meas=meas,
                    meas_pos=meas_pos, mode=mode, mu=mu, updates=updates)
 
     @classmethod
