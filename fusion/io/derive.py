@@ -146,7 +146,7 @@ def match_truth(t_ns: Array, X: Array, P: Array, truth: dict[int, dict[str, Arra
         j = np.arange(int(k.max()))
         valid = j[None, :] < k[:, None]
         cand = start[u_r[small]][:, None] + np.where(valid, j[None, :], 0)
-        D = _sum_last(np.square(Xp[small][:, None, :] - Cp[cand]))
+        D = sum_last(np.square(Xp[small][:, None, :] - Cp[cand]))
         best[small] = cand[np.arange(len(k)), np.argmin(np.where(valid, D, np.inf), axis=1)]
     for u in np.unique(u_r[~small]).tolist():  # nearest true target by a k-d tree: O(k log j)
         at = np.flatnonzero(u_r == u)
@@ -164,7 +164,7 @@ def match_truth(t_ns: Array, X: Array, P: Array, truth: dict[int, dict[str, Arra
     return rows[ok], C_all[best[ok]], [names[b] for b in best[ok].tolist()]
 
 
-def _sum_last(a: Array) -> Array:
+def sum_last(a: Array) -> Array:
     """np.sum(a, axis=-1), in numpy's order for a last axis of fewer than 8 components (left to
     right; the same bits, checked in tests/io/test_sum_last.py), without its per-row
     reduction loop (~0.2 us a row here); np.sum itself for more."""
