@@ -355,7 +355,13 @@ class IntakeConfig(Section):
     `queue_max` samples or `queue_max_bytes` bytes wait, the source holding the most samples
     loses its oldest ones, or the new sample when it is that source's ("overload"). All counted,
     so memory stays bounded, Zenoh is never blocked, and one source's flood costs only that
-    source. `batch_max` samples are processed per tracker call, taken round-robin across sources.
+    source. `batch_max` samples are processed per tracker call, taken round-robin across sources;
+    a full batch that holds late measurements (of a scan before the tracker's newest) with more
+    samples queued takes up to `late_batch_max`, so that one replay serves the late data of more
+    scans (measured, 1000 targets, 10 % late, blast: 24.2k against 18.4k measurements/s with
+    20 000 against 5 000; batches that large for every backlog cost ~8 % in order, hence only
+    for batches with late data). Results do not depend on batching; a larger batch makes the
+    status and snapshot answers wait longer under such a backlog (~1 s at 20 000).
     A batch waits for a burst still arriving (fusion.io.burst): while samples keep coming, each
     within `burst_gap_ms` of the last, for at most `burst_linger_ms` (0: no wait), so a sensor's
     scan reaches the tracker whole instead of run again for its second half.
@@ -371,6 +377,7 @@ class IntakeConfig(Section):
     source_rate_hz: NonNegFloat = 0.0
     source_burst: Annotated[int, msgspec.Meta(ge=1)] = 1000
     batch_max: Annotated[int, msgspec.Meta(ge=1)] = 5_000
+    late_batch_max: Annotated[int, msgspec.Meta(ge=1)] = 20_000
     burst_gap_ms: NonNegFloat = 2.0
     burst_linger_ms: NonNegFloat = 20.0
     drain_deadline_s: NonNegFloat = 10.0

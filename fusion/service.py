@@ -250,6 +250,20 @@ class Service:
                               on_chunk=lambda chunk: decoded.extend(self.pipeline.decoded(chunk)))
         return drained, decoded
 
+    def _holds_late(self, decoded: list[Detection | None]) -> bool:
+        """Whether a batch holds a measurement of a scan before the tracker's newest (a replay)."""
+        newest = self.tracker.newest_scan
+        return newest is not None and any(d is not None and (d.t_ns, d.sensor_id) < newest for d in decoded)
+
+    def _grow(self, batch: list[Record], decoded: list[Detection | None]) -> bool:
+        """A full batch with late data and a backlog behind it, grown (in place, its decoded
+        measurements with it) to up to intake.late_batch_max samples; whether samples are still
+        queued after it (its last scan may then wait for its rest, as a cut batch's)."""
+        more = self._drain(max(self.config.intake.late_batch_max - len(batch), 0))
+        batch.extend(more)
+        decoded.extend(self.pipeline.decoded(more))
+        return bool(self._q)
+
     def _step(self, batch: list[Record], *, more: bool = False, decoded: list[Detection | None] | None = None) -> None:
         """One batch: to the stream file, through the pipeline (`more`: a backlog follows, so the
         batch's last scan waits for its rest: fusion.pipeline; `decoded`: its measurements, if
@@ -308,6 +322,8 @@ class Service:
                 if self._writer is not None and self._q:
                     self._writer.loop_busy()  # the recording's thread waits for the loop's next pause
                 (batch, cut), decoded = self._drain_burst(batch_max)
+                if batch and cut and self._q and self._holds_late(decoded):
+                    cut = self._grow(batch, decoded)  # one replay for the late data of more scans
                 if batch:
                     self._step(batch, more=cut and bool(self._q), decoded=decoded)  # a cut burst's last scan waits
                     if not self._q:  # caught up: make the status answer current at once

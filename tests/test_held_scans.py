@@ -60,10 +60,11 @@ def test_a_batch_of_one_scan_waits_whole() -> None:
     assert pipe.holding == 0 and pipe.counts().received == 1 and out.result.estimates
 
 
-def test_the_service_holds_a_cut_scan_only_with_a_backlog_and_its_counts_add_up(tmp_path) -> None:
-    """The live service with batches of 40 samples (intake.batch_max) fed the mix as fast as it
-    goes: full batches with a backlog behind them pass `more`, the counts in the status add up
-    after every batch (held measurements count as queued), and everything is applied in the end."""
+def _blast_the_mix(tmp_path, observe, **intake: int) -> list:
+    """10 s of the mix, as fast as it goes, at a live service with the given [intake] settings;
+    `observe(svc, batch, more, decoded, step)` wraps each batch on the loop's thread. Returns
+    what observe returned for each batch, once the final counts show everything received, none
+    queued, every measurement applied, a duplicate or refused."""
     import msgspec
 
     from publishers.publish import publish
@@ -72,15 +73,14 @@ def test_the_service_holds_a_cut_scan_only_with_a_backlog_and_its_counts_add_up(
 
     spec, cfg = scenario_config("mix")
     spec = msgspec.structs.replace(spec, duration_s=10.0)
-    cfg = msgspec.structs.replace(cfg, intake=msgspec.structs.replace(cfg.intake, batch_max=40))
+    cfg = msgspec.structs.replace(cfg, intake=msgspec.structs.replace(cfg.intake, **intake))
     samples, _ = build_stream(spec, namespace=cfg.namespace)
-    seen: list[tuple[bool, int, dict]] = []
+    seen: list = []
     with running_service(cfg, tmp_path) as (svc, endpoint):
         step = svc._step
 
-        def probe(batch, *, more=False, decoded=None):  # on the loop's thread, after each batch
-            step(batch, more=more, decoded=decoded)
-            seen.append((more, svc.pipeline.holding, svc.status_dict()["counts"]))
+        def probe(batch, *, more=False, decoded=None):  # on the loop's thread
+            seen.append(observe(svc, batch, more, decoded, step))
 
         svc._step = probe  # type: ignore[method-assign]
         pub = client(endpoint)
@@ -90,9 +90,38 @@ def test_the_service_holds_a_cut_scan_only_with_a_backlog_and_its_counts_add_up(
             pub.close()
         assert svc.wait_idle(timeout_s=60.0)
         final = svc.status_dict()["counts"]
+    meas = sum(1 for s in samples if "/meas/" in s.key)
+    assert final["queued"] == 0 and final["received"] == len(samples)
+    assert final["applied"] + final["duplicates"] + sum(final["refused"].values()) == meas
+    return seen
+
+
+def test_the_service_holds_a_cut_scan_only_with_a_backlog_and_its_counts_add_up(tmp_path) -> None:
+    """The live service with batches of 40 samples (intake.batch_max) fed the mix as fast as it
+    goes: full batches with a backlog behind them pass `more`, the counts in the status add up
+    after every batch (held measurements count as queued), and everything is applied in the end."""
+
+    def after_each(svc, batch, more, decoded, step):
+        step(batch, more=more, decoded=decoded)
+        return more, svc.pipeline.holding, svc.status_dict()["counts"]
+
+    seen = _blast_the_mix(tmp_path, after_each, batch_max=40, late_batch_max=40)
     assert any(more and held for more, held, _ in seen), "no batch held a scan: no backlog formed"
     for _, _, c in seen:
         assert c["received"] == c["applied"] + c["truth"] + c["duplicates"] + sum(c["refused"].values()) + c["queued"]
-    assert final["queued"] == 0 and final["received"] == len(samples)
-    assert final["applied"] + final["duplicates"] + sum(final["refused"].values()) == sum(
-        1 for s in samples if "/meas/" in s.key)
+
+
+def test_a_full_batch_with_late_data_grows_to_late_batch_max(tmp_path) -> None:
+    """The live service with batch_max 40 and late_batch_max 200, fed the mix (its sensors'
+    latencies deliver measurements after later scans) as fast as it goes: a full batch holding
+    a measurement of a scan before the tracker's newest, with a backlog behind it, is grown up
+    to 200 samples; no batch without late data is; everything is applied."""
+
+    def before_each(svc, batch, more, decoded, step):
+        late = decoded is not None and svc._holds_late(decoded)
+        step(batch, more=more, decoded=decoded)
+        return len(batch), late
+
+    seen = _blast_the_mix(tmp_path, before_each, batch_max=40, late_batch_max=200)
+    grown = [n for n, late in seen if n > 40]
+    assert grown and max(grown) <= 200 and all(late for n, late in seen if n > 40), seen

@@ -121,6 +121,12 @@ class Tracker:
         return tuple(ts.track(i) for i in range(len(ts)) if ts.status[i] == Status.CONFIRMED)
 
     @property
+    def newest_scan(self) -> ScanKey | None:
+        """The newest scan run, (t_ns, sensor_id): a measurement of an earlier scan is late (its
+        arrival replays the scans from its own)."""
+        return self.history.newest or self.intake.committed
+
+    @property
     def now_ns(self) -> int | None:
         """The stream's clock (sensor time) at the last admission; see fusion.tracking.intake."""
         return self.intake.now_ns
