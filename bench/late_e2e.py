@@ -19,8 +19,9 @@ latency (arrival of an estimate's first revision - its t_ns). The p99 is not sho
 the measurements sent 67 ms to 1.7 s after their time, it is their lateness, not the service's.
 
 The throughput is the figure of a saturated service: it drains up to intake.batch_max (5 000) samples per
-tracker call, so a late measurement and the scans after it are often run in one call, and one
-rewind covers all the late data of a batch. bench.late_data gives the tracker's figure with one
+tracker call, and a full batch holding late data up to intake.late_batch_max (20 000), so a late
+measurement and the scans after it are often run in one call, and one rewind covers all the
+late data of a batch. bench.late_data gives the tracker's figure with one
 call per scan (a service keeping up with each scan as it comes), where every late measurement
 costs a replay of its own.
 """
