@@ -91,7 +91,7 @@ def state_of(tr: Tracker) -> TrackerState:
         rows={f: Column.of(getattr(ts, f)) for f in ROW_FIELDS if getattr(ts, f) is not None},
         clocks={s: ClockState(*c.state()) for s, c in intake.clocks.sources.items()},
         first_arrival_ns=intake.clocks.first_arrival_ns, now_ns=intake.now_ns, horizon_ns=intake.horizon_ns,
-        newest_scan=tr.history.newest or intake.committed,
+        newest_scan=tr.newest_scan,
         inputs=[] if tr.inputs is None else [(t, q, u.tolist()) for t, q, u in tr.inputs.items()],
         tallies={_tally_key(k): v for k, v in sorted(tr.history.tally().items(), key=lambda kv: _tally_key(kv[0]))},
         intake_counts=dict(tr.intake_counts), refused={r.value: n for r, n in tr.refused_counts.items()},
