@@ -6,6 +6,8 @@ pass `more` (the loop only when a full batch leaves a backlog)."""
 
 from __future__ import annotations
 
+import functools
+
 from bench.recording_cost import CONFIG, batches
 from fusion.config import ServiceConfig, load_service_config
 from fusion.io import wire
@@ -79,8 +81,9 @@ def _blast_the_mix(tmp_path, observe, **intake: int) -> list:
     with running_service(cfg, tmp_path) as (svc, endpoint):
         step = svc._step
 
-        def probe(batch, *, more=False, decoded=None):  # on the loop's thread
-            seen.append(observe(svc, batch, more, decoded, step))
+        def probe(batch, *, more=False, decoded=None, **other):  # on the loop's thread
+            # keywords _step has beyond these go through as they came (observe passes more and decoded)
+            seen.append(observe(svc, batch, more, decoded, functools.partial(step, **other)))
 
         svc._step = probe  # type: ignore[method-assign]
         pub = client(endpoint)
