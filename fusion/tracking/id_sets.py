@@ -109,54 +109,58 @@ _NO_IDS = np.zeros(0, dtype=np.int64)
 @njit(cache=True, fastmath=False)
 def _rerun_sets(old_ids: np.ndarray, old_seqs: np.ndarray, seed_ids: np.ndarray, add_ids: np.ndarray,
                 add_seqs: np.ndarray, seed_seqs: np.ndarray, ts_ids: np.ndarray, seqs: np.ndarray,
+                via_ids: np.ndarray, via_seqs: np.ndarray,
                 uid: np.ndarray, inv_i: np.ndarray, useq: np.ndarray, inv_j: np.ndarray) -> tuple[np.ndarray, ...]:
     keep = ~_member(old_ids, seed_ids)
     new_ids = np.concatenate((old_ids[keep], add_ids))
     new_seqs = np.concatenate((old_seqs[keep], add_seqs))
-    # the reach: what the seeds connect to over the pairs of both runs (the old ones and the added)
-    E = old_ids.size + add_ids.size
+    # the reach: what the seeds connect to over the stored run's pairs `via` and the added ones
+    E = via_ids.size + add_ids.size
     if uid.size == 0:
-        uid, inv_i = _dense_compiled(np.concatenate((old_ids, add_ids, seed_ids)))
+        uid, inv_i = _dense_compiled(np.concatenate((via_ids, add_ids, seed_ids)))
     if useq.size == 0:
-        useq, inv_j = _dense_compiled(np.concatenate((old_seqs, add_seqs, seed_seqs)))
+        useq, inv_j = _dense_compiled(np.concatenate((via_seqs, add_seqs, seed_seqs)))
     seen_i, seen_j = _reached(inv_i[:E], inv_j[:E], uid.size, useq.size, inv_i[E:], inv_j[E:])
     rows = np.flatnonzero(_member(ts_ids, uid[seen_i]))
     js = np.flatnonzero(_member(seqs, useq[seen_j]))
-    # the new pairs inside the reach, as (row of the part, detection of the part), by (detection, row)
+    # the new pairs inside the reach (both ends), as (row of the part, detection of the part), by (detection, row)
     sub = ts_ids[rows]
+    sub_seqs = seqs[js]
     order = np.argsort(sub, kind="mergesort")
-    inside = np.flatnonzero(_member(new_ids, sub))
+    inside = np.flatnonzero(_member(new_ids, sub) & _member(new_seqs, sub_seqs))
     i = order[np.searchsorted(sub[order], new_ids[inside])]
-    j = np.searchsorted(seqs[js], new_seqs[inside])
+    j = np.searchsorted(sub_seqs, new_seqs[inside])
     o = np.argsort(j * (rows.shape[0] + 1) + i, kind="mergesort")
     return new_ids, new_seqs, rows, js, i[o], j[o]
 
 
 def rerun_sets(old_ids: np.ndarray, old_seqs: np.ndarray, seed_ids: np.ndarray, add_ids: np.ndarray,
-               add_seqs: np.ndarray, seed_seqs: np.ndarray, ts_ids: np.ndarray, seqs: np.ndarray
-               ) -> tuple[np.ndarray, ...]:
+               add_seqs: np.ndarray, seed_seqs: np.ndarray, ts_ids: np.ndarray, seqs: np.ndarray,
+               via: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[np.ndarray, ...]:
     """The id-set steps of a partial re-run (fusion.tracking.replay) in one compiled call. The
     stored run's coarse pairs (old_ids[k] track, old_seqs[k] detection) less those of the tracks
     `seed_ids` (changed or gone: the seeds among the tracks), with the pairs `add_ids`, `add_seqs`
     (of the changed tracks and new detections: the seeds `seed_seqs`) added, are the new run's
-    pairs. Returns:
+    pairs. `via`: the stored run's pairs the reach follows besides the added ones (by default its
+    coarse pairs; fusion.tracking.replay passes its fine ones). Returns:
       new_ids, new_seqs: the new run's pairs (the kept old ones in their order, then the added);
       rows, js:          the reach: the rows of ts_ids and positions of seqs (both ascending) of
-                         the tracks and detections connected to the seeds over the pairs of both
-                         runs (a breadth-first search from the seeds over the pairs);
-      ti, mj:            the new pairs inside the reach as indices into rows and js, sorted by
-                         (mj, ti), as fusion.core.association.coarse_pairs orders them.
-    `seqs` is sorted ascending; the reach is closed under the pairs (a pair with one end in it has
-    both), so every pair inside has its detection among js."""
+                         the tracks and detections connected to the seeds over the pairs `via`
+                         and the added ones (a breadth-first search from the seeds);
+      ti, mj:            the new pairs with both ends inside the reach as indices into rows and
+                         js, sorted by (mj, ti), as fusion.core.association.coarse_pairs orders them.
+    `seqs` is sorted ascending."""
     c = np.ascontiguousarray
-    old_ids, old_seqs, seed_ids, add_ids, add_seqs, seed_seqs, ts_ids, seqs = (
-        c(a, dtype=np.int64) for a in (old_ids, old_seqs, seed_ids, add_ids, add_seqs, seed_seqs, ts_ids, seqs))
+    via_ids, via_seqs = (old_ids, old_seqs) if via is None else via
+    old_ids, old_seqs, seed_ids, add_ids, add_seqs, seed_seqs, ts_ids, seqs, via_ids, via_seqs = (
+        c(a, dtype=np.int64) for a in (old_ids, old_seqs, seed_ids, add_ids, add_seqs, seed_seqs, ts_ids, seqs,
+                                       via_ids, via_seqs))
     # the ids and seqs as dense indices (their sorted unique values, and each one's index in them):
     # numpy's sort for many pairs; for fewer (numpy's call costs more than the compiled sort of a
     # hundred ids, its sort far less at a thousand) the compiled call makes them
     uid = inv_i = useq = inv_j = _NO_IDS
-    if old_ids.size + add_ids.size >= NUMPY_SORT_FROM:
-        uid, inv_i = np.unique(np.concatenate((old_ids, add_ids, seed_ids)), return_inverse=True)
-        useq, inv_j = np.unique(np.concatenate((old_seqs, add_seqs, seed_seqs)), return_inverse=True)
-    return _rerun_sets(old_ids, old_seqs, seed_ids, add_ids, add_seqs, seed_seqs, ts_ids, seqs, uid, c(inv_i, np.int64),
-                       useq, c(inv_j, np.int64))
+    if via_ids.size + add_ids.size >= NUMPY_SORT_FROM:
+        uid, inv_i = np.unique(np.concatenate((via_ids, add_ids, seed_ids)), return_inverse=True)
+        useq, inv_j = np.unique(np.concatenate((via_seqs, add_seqs, seed_seqs)), return_inverse=True)
+    return _rerun_sets(old_ids, old_seqs, seed_ids, add_ids, add_seqs, seed_seqs, ts_ids, seqs, via_ids, via_seqs,
+                       uid, c(inv_i, np.int64), useq, c(inv_j, np.int64))

@@ -4,16 +4,26 @@ A scan was run on the track set B with detections D and produced the set A and i
 history's Entry). Run again, it has the set B' and detections D' (D and the late ones):
   seeds:    the rows of B' that differ bit for bit from B's row of the same track (or that B
             lacks), the tracks of B that B' lacks, and the detections of D' not in D;
-  reach:    the connected components, over tracks (by id) and detections (by seq), of the coarse
-            pairs of both runs (fusion.core.association.coarse_pairs on B, D and on B', D'), that
-            hold a seed;
-  re-run:   run_scan on the tracks and detections of the reach alone;
+  reach:    the connected components, over tracks (by id) and detections (by seq), that hold a
+            seed, of the old run's fine pairs (a detection and the tracks in whose fine gate it
+            fell: its ScanAssociations.gated) and the new run's coarse pairs of the changed tracks
+            and of the new detections (fusion.core.association.coarse_pairs on B', D');
+  re-run:   run_scan on the tracks and detections of the reach alone, with the new coarse pairs
+            that have both ends in it;
   the rest: every other track and detection saw the same rows, the same detections and the same
             pairs in both runs, and every step of a scan after the coarse gate is per pair (fine
-            gate), per component of the pairs (the assignment: fusion.core.association.gnn_assign
-            decides each component alone) or per row (update, initiation, lifecycle), so its
-            results are the stored ones: its rows are copied from A, its estimates, events and
-            associations from the stored outcome.
+            gate), per component of the fine pairs (the assignment: fusion.core.association.gnn_assign
+            decides each component alone; births take what it left) or per row (update,
+            initiation, lifecycle), so its results are the stored ones: its rows are copied from
+            A, its estimates, events and associations from the stored outcome.
+            Why the fine pairs suffice: an unchanged track and an old detection make the same
+            fine-gate decision in both runs, so an unchanged track's fine pairs are the old ones
+            and its other coarse pairs can never be assigned; a changed track's new pairs are all
+            followed (its coarse ones), and its old fine pairs lead to the detections it may give
+            up. A reached track's coarse pair with a detection outside the reach is therefore no
+            fine pair in either run, and the part leaves it out. At 667 targets with 10 % late
+            data it re-runs 46 tracks a partial scan, against 73 over the coarse pairs of both
+            runs (the same 62 664 revised estimates).
 The after-set is assembled (fusion.tracking.splice) in the order the whole scan builds it (the
 surviving rows of B' in their order, then the births in detection order), so the result is
 bit-identical to running the whole scan. Where a rule counts over the whole scan the whole scan is run instead (`None`):
@@ -144,6 +154,12 @@ def _added_pairs(ts: TrackSet, changed: np.ndarray, new: np.ndarray, points: tup
     return np.concatenate(ids), np.concatenate(sq)
 
 
+def _fine_pairs(assoc: ScanAssociations) -> tuple[np.ndarray, np.ndarray]:
+    """The stored run's fine pairs (track id, detection seq): each detection with the tracks in
+    whose fine gate it fell (ScanAssociations.gated)."""
+    return assoc.gated, np.repeat(assoc.seq, np.diff(assoc.gated_at))
+
+
 _COUNTED_CODES = (OUTCOME_CODE[Outcome.UPDATED], OUTCOME_CODE[Outcome.BORN])  # association_kernels.counted's
 _NO_SIGNATURES = np.empty(0, dtype=np.int64)
 
@@ -196,7 +212,7 @@ def rerun(ts: TrackSet, key: ScanKey, dets: tuple[Detection, ...], ctx: ScanCont
     add_ids, add_seqs = _added_pairs(ts, changed, new, points, seqs, key[0], ctx)
     seeds = np.concatenate([ts.ids[changed], gone])  # the tracks whose pairs change
     new_ids, new_seqs, rows, js, ti, mj = rerun_sets(old_gates.ids, old_gates.seqs, seeds, add_ids, add_seqs,
-                                                     seqs[new], ts.ids, seqs)
+                                                     seqs[new], ts.ids, seqs, via=_fine_pairs(old.associations))
     new_gates = Gates(new_ids, new_seqs, *points, seqs)
     if rows.size == len(ts) and js.size == len(dets):
         return None  # everything is reached: the whole scan is the same work

@@ -144,30 +144,35 @@ def _grown_reference(e_ids, e_seqs, seed_ids, seed_seqs):
         hot_ids, hot_seqs = more_ids, more_seqs
 
 
-def _rerun_sets_reference(old_ids, old_seqs, ts_ids, changed, gone, add_ids, add_seqs, new_seqs, seqs):
+def _rerun_sets_reference(old_ids, old_seqs, ts_ids, changed, gone, add_ids, add_seqs, new_seqs, seqs, via=None):
     """The steps fusion.tracking.replay took before rerun_sets, one numpy call at a time: the new
-    pairs (_new_gates), the reach over both runs' pairs (_reach), its rows and detections, and the
-    coarse gate of the part (_sub_coarse)."""
+    pairs (_new_gates), the reach over the stored pairs `via` (default: the old coarse ones) and
+    the added ones (_reach), its rows and detections, and the coarse gate of the part (_sub_coarse:
+    the new pairs with both ends in the reach)."""
     keep = np.isin(old_ids, ts_ids[~changed])
     new_ids, nseqs = np.concatenate([old_ids[keep], add_ids]), np.concatenate([old_seqs[keep], add_seqs])
-    hot_ids, hot_seqs = _grown_reference(np.concatenate([new_ids, old_ids]), np.concatenate([nseqs, old_seqs]),
+    via_ids, via_seqs = (old_ids, old_seqs) if via is None else via
+    hot_ids, hot_seqs = _grown_reference(np.concatenate([add_ids, via_ids]), np.concatenate([add_seqs, via_seqs]),
                                          np.concatenate([ts_ids[changed], gone]), new_seqs)
     rows, js = np.flatnonzero(np.isin(ts_ids, hot_ids)), np.flatnonzero(np.isin(seqs, hot_seqs))
     sub = ts_ids[rows]
-    inside = np.isin(new_ids, sub)
+    inside = np.isin(new_ids, sub) & np.isin(nseqs, seqs[js])
     i = np.array([int(np.flatnonzero(sub == x)[0]) for x in new_ids[inside]], dtype=np.int64)
     j = np.searchsorted(seqs[js], nseqs[inside])
     o = np.lexsort((i, j))
     return new_ids, nseqs, rows, js, i[o], j[o]
 
 
+@pytest.mark.parametrize("fine", [False, True], ids=["via-coarse", "via-fine"])
 @pytest.mark.parametrize("size", [(40, 50, 70, 8), (700, 800, 1500, 60)], ids=["few-pairs", "many-pairs"])
 @pytest.mark.parametrize("seed", range(12))
-def test_rerun_sets_are_the_steps_they_replaced(seed: int, size: tuple[int, int, int, int]) -> None:
+def test_rerun_sets_are_the_steps_they_replaced(seed: int, size: tuple[int, int, int, int], fine: bool) -> None:
     """A stored run's pairs over T tracks and D detections (up to E pairs; the 5 last detections
     new), some tracks changed, some gone, new detections, up to A added pairs of the changed
     tracks and new detections. Few pairs: rerun_sets sorts the ids compiled; many (beyond
-    id_sets.NUMPY_SORT_FROM): with numpy's sort."""
+    id_sets.NUMPY_SORT_FROM): with numpy's sort. The reach follows the stored coarse pairs, or
+    (`fine`) a subset of them, as the stored run's fine pairs are: then some new pairs of
+    reached tracks end outside the reach, and are not the part's."""
     T, D, E_max, A_max = size
     rng = np.random.default_rng(seed)
     before = rng.choice(2**62, T, replace=False).astype(np.int64)
@@ -187,11 +192,31 @@ def test_rerun_sets_are_the_steps_they_replaced(seed: int, size: tuple[int, int,
                              axis=1), axis=0)
     add_ids, add_seqs = add[:, 0].copy(), add[:, 1].copy()
     drop = np.concatenate([ts_ids[changed], before[gone_mask]])
-    got = rerun_sets(old_ids, old_seqs, drop, add_ids, add_seqs, seqs[new], ts_ids, seqs)
+    via = None
+    if fine:
+        sel = rng.random(old_ids.size) < 0.4
+        via = (old_ids[sel], old_seqs[sel])
+    got = rerun_sets(old_ids, old_seqs, drop, add_ids, add_seqs, seqs[new], ts_ids, seqs, via=via)
     want = _rerun_sets_reference(old_ids, old_seqs, ts_ids, changed, before[gone_mask], add_ids, add_seqs, seqs[new],
-                                 seqs)
-    assert (old_ids.size + add_ids.size >= NUMPY_SORT_FROM) == (T > 100)
+                                 seqs, via)
+    if not fine:
+        assert (old_ids.size + add_ids.size >= NUMPY_SORT_FROM) == (T > 100)
     assert _bits(*got) == _bits(*(np.asarray(w).astype(np.int64) for w in want))
+
+
+def test_the_reach_follows_the_fine_pairs_and_the_part_keeps_its_pairs_inside() -> None:
+    """Track 10 changed (a seed, no new pairs), track 20 not; detections 1 and 2. Coarse pairs of
+    the stored run: (10, 1), (20, 1), (20, 2); its fine pairs: (10, 1), (20, 1). Over the fine
+    pairs the reach is tracks 10 and 20 and detection 1, and the part's pairs are (20, 1) alone:
+    track 20's coarse pair with detection 2 (not in its fine gate, so it cannot change the
+    detection's fate nor the track's) stays out. Over the coarse pairs detection 2 is reached too."""
+    old_ids, old_seqs = np.array([10, 20, 20]), np.array([1, 1, 2])
+    ts_ids, seqs, none = np.array([10, 20]), np.array([1, 2]), np.zeros(0, np.int64)
+    fine = rerun_sets(old_ids, old_seqs, np.array([10]), none, none, none, ts_ids, seqs,
+                      via=(np.array([10, 20]), np.array([1, 1])))
+    assert [a.tolist() for a in fine] == [[20, 20], [1, 2], [0, 1], [0], [1], [0]]
+    coarse = rerun_sets(old_ids, old_seqs, np.array([10]), none, none, none, ts_ids, seqs)
+    assert [a.tolist() for a in coarse[2:]] == [[0, 1], [0, 1], [1, 1], [0, 1]]
 
 
 @pytest.mark.parametrize("vel", [True, False], ids=["pos-vel", "pos-only"])
