@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from enum import StrEnum
+from operator import attrgetter
 from typing import NamedTuple
 
 import numpy as np
@@ -61,6 +63,14 @@ class Detection(NamedTuple):
             None if R is None else np.asarray(R, dtype=np.float64), None if arrival_ns is None else int(arrival_ns),
             int(epoch),
         )
+
+
+SEQ = attrgetter("seq")  # a Detection's seq: the order of a scan's detections
+
+
+def seqs_of(dets: Sequence[Detection]) -> np.ndarray:
+    """The detections' seqs, (n,) int64, in their order (one C-level pass: map and fromiter)."""
+    return np.fromiter(map(SEQ, dets), dtype=np.int64, count=len(dets))
 
 
 @dataclass(frozen=True, slots=True)

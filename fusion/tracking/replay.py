@@ -42,7 +42,7 @@ import numpy as np
 from fusion.core.association import coarse_pairs
 from fusion.core.checks import Array
 from fusion.tracking.association_kernels import counted
-from fusion.tracking.detection import Detection
+from fusion.tracking.detection import Detection, seqs_of
 from fusion.tracking.id_sets import member, rerun_sets
 from fusion.tracking.results import OUTCOME_CODE, EventKind, Outcome, ScanAssociations, ScanKey
 from fusion.tracking.scan import Coarse, ScanContext, ScanOutcome, Tally, measured_points, run_scan
@@ -105,7 +105,7 @@ def gates_of(ts: TrackSet, key: ScanKey, dets: tuple[Detection, ...], ctx: ScanC
     mpos, mvar = points if points is not None else measured_points(ctx.sensors[key[1]], dets)
     tpos, tvar = ts.predicted_position(key[0], ctx.q2)
     ci, cj = coarse_pairs(tpos, tvar, mpos, mvar, k=ctx.coarse_k)
-    seqs = np.array([d.seq for d in dets], dtype=np.int64)
+    seqs = seqs_of(dets)
     return Gates(ts.ids[ci], seqs[cj], mpos, mvar, seqs)
 
 
@@ -114,7 +114,7 @@ def gates_of_run(ts: TrackSet, dets: tuple[Detection, ...], out: ScanOutcome) ->
     if out.coarse is None or out.variances is None:
         return None
     ci, cj = out.coarse
-    seqs = np.array([d.seq for d in dets], dtype=np.int64)
+    seqs = seqs_of(dets)
     return Gates(ts.ids[ci], seqs[cj], out.positions, out.variances, seqs)
 
 
@@ -190,11 +190,11 @@ def rerun(ts: TrackSet, key: ScanKey, dets: tuple[Detection, ...], ctx: ScanCont
         return None  # the old run's counts are not per component: run the whole scan
     old_gates = old.gates if old.gates is not None else gates_of(old.before, key, old.dets, ctx)
     old_seqs = old_gates.det_seqs if old_gates.det_seqs is not None else \
-        np.array([d.seq for d in old.dets], dtype=np.int64)
+        seqs_of(old.dets)
     if len(dets) == len(old.dets):  # dets hold old.dets: the same detections
         seqs, old_j = old_seqs, np.arange(len(dets))
     else:
-        seqs = np.array([d.seq for d in dets], dtype=np.int64)
+        seqs = seqs_of(dets)
         old_j = np.searchsorted(seqs, old_seqs)  # both sorted by seq
     new = np.ones(len(dets), dtype=bool)
     new[old_j] = False

@@ -25,7 +25,7 @@ from fusion.core.association import coarse_pairs, gnn_assign
 from fusion.core.checks import Array
 from fusion.core.imm import IMM, Filter, combine
 from fusion.tracking.association_kernels import built
-from fusion.tracking.detection import Detection
+from fusion.tracking.detection import Detection, seqs_of
 from fusion.tracking.gating import Gated, Gater, Measured
 from fusion.tracking.lifecycle import Lifecycle
 from fusion.tracking.models import SensorModel
@@ -125,7 +125,7 @@ def run_scan(ts: TrackSet, key: ScanKey, dets: tuple[Detection, ...], ctx: ScanC
     hits = ts.hits[ti] + 1
     confirm = ctx.lifecycle.confirms(ts.status[ti], hits, ts.chances[ti] + 1)
     status = np.where(confirm, np.int8(Status.CONFIRMED), ts.status[ti]).astype(np.int8)
-    det_seqs = np.fromiter((d.seq for d in dets), dtype=np.int64, count=len(dets))
+    det_seqs = seqs_of(dets)
     seqs = det_seqs[mj]
     # what an update changes in a row (its id, birth, origin and counters stay)
     changes = {"status": status, "hits": hits, "t_ns": np.full(ti.size, t_ns, np.int64),

@@ -47,6 +47,7 @@ from fusion.tracking.results import (
     TrackEvent,
 )
 from fusion.tracking.scan import ScanContext, Tally, run_scan
+from fusion.tracking.step_order import merged, new_points, withdrawals_first
 from fusion.tracking.trackset import Layout, Rows, Status, Track, TrackSet
 
 
@@ -191,15 +192,14 @@ class Tracker:
         for key in rw.keys:
             prev = rw.old.get(key)
             arrived = scans.get(key)
-            dets = prev.dets if arrived is None and prev is not None else \
-                tuple(sorted((prev.dets if prev else ()) + tuple(arrived or ()), key=lambda d: d.seq))
+            dets = prev.dets if arrived is None and prev is not None else merged(prev, arrived)
             part = self._rerun(ts, key, dets, prev, rw.after.get(key), hint)
             out = part.outcome if part is not None else run_scan(ts, key, dets, self.ctx)
             kept = part.kept if part is not None else frozenset()
             hint = part.hint if part is not None else None
             gates = part.gates if part is not None else gates_of_run(ts, dets, out)
             if arrived:
-                points.append(_new_points(key, dets, arrived, prev is not None, out.positions,
+                points.append(new_points(key, dets, arrived, prev is not None, out.positions,
                                           None if gates is None else gates.det_seqs))
             entry = Entry(key, dets, ts, tally=out.tally, associations=out.associations, gates=gates)
             estimates.extend(revise(entry, prev, out.estimates, kept, out.signatures))
@@ -270,29 +270,3 @@ class Tracker:
             self.intake.commit(gone[-1].key)
         if self.inputs is not None and h is not None:
             self.intake.forget_inputs(self.inputs.forget_before(h))
-
-
-def withdrawals_first(events: list[TrackEvent]) -> tuple[TrackEvent, ...]:
-    """A step's events with its withdrawals first (each kind in its order). Two scans of the same
-    time (two sensors) can hand one event over: a replay runs the first again, which now confirms
-    the track, then the second, whose confirmation of it (the same event: kind, track, time,
-    reason) vanished. Reported in that order, a consumer that applies them one by one took the
-    event back after it came again (in the mix, a track that stayed confirmed lost its
-    "confirmed" in every subscriber); withdrawn first, it stands."""
-    if not any(ev.retracted for ev in events):
-        return tuple(events)
-    return tuple([ev for ev in events if ev.retracted] + [ev for ev in events if not ev.retracted])
-
-
-def _new_points(key: ScanKey, dets: tuple[Detection, ...], arrived: list[Detection], again: bool,
-                positions: np.ndarray, seqs: np.ndarray | None) -> ScanPoints:
-    """The world points (the scan's `positions`, in the order of `dets`) of the measurements that
-    arrived in this call: all of the scan's when it runs for the first time, the new ones when it
-    runs again with more (a seq is accepted once: admission refuses duplicates). `seqs`: dets'
-    seqs where the scan's gates hold them already (Gates.det_seqs), else None."""
-    if seqs is None:
-        seqs = np.fromiter((d.seq for d in dets), dtype=np.int64, count=len(dets))
-    if again:
-        new = np.isin(seqs, np.fromiter((d.seq for d in arrived), dtype=np.int64, count=len(arrived)))
-        seqs, positions = seqs[new], positions[new]
-    return ScanPoints(key[1], key[0], seqs, positions)

@@ -1,0 +1,52 @@
+"""The order of what a step of the tracker takes and reports (fusion.tracking.tracker): a scan's
+detections by seq, with the ones that arrived merged in; the world points of the measurements
+that arrived; a step's events, withdrawals first."""
+
+from __future__ import annotations
+
+from bisect import insort
+
+import numpy as np
+
+from fusion.tracking.detection import SEQ, Detection, seqs_of
+from fusion.tracking.history import Entry
+from fusion.tracking.results import ScanKey, ScanPoints, TrackEvent
+
+
+def merged(prev: Entry | None, arrived: list[Detection] | None) -> tuple[Detection, ...]:
+    """A scan's detections by seq: its stored ones (sorted) with those that arrived now, as
+    sorted(stored + arrived, key=seq) orders them (stable: an equal seq after the stored ones),
+    each arrived one put in place by binary search instead of sorting the whole scan again
+    (a late measurement joins a scan of hundreds)."""
+    if prev is None:
+        return tuple(sorted(arrived or (), key=SEQ))
+    out = list(prev.dets)
+    for d in sorted(arrived or (), key=SEQ):
+        insort(out, d, key=SEQ)
+    return tuple(out)
+
+
+def withdrawals_first(events: list[TrackEvent]) -> tuple[TrackEvent, ...]:
+    """A step's events with its withdrawals first (each kind in its order). Two scans of the same
+    time (two sensors) can hand one event over: a replay runs the first again, which now confirms
+    the track, then the second, whose confirmation of it (the same event: kind, track, time,
+    reason) vanished. Reported in that order, a consumer that applies them one by one took the
+    event back after it came again (in the mix, a track that stayed confirmed lost its
+    "confirmed" in every subscriber); withdrawn first, it stands."""
+    if not any(ev.retracted for ev in events):
+        return tuple(events)
+    return tuple([ev for ev in events if ev.retracted] + [ev for ev in events if not ev.retracted])
+
+
+def new_points(key: ScanKey, dets: tuple[Detection, ...], arrived: list[Detection], again: bool,
+                positions: np.ndarray, seqs: np.ndarray | None) -> ScanPoints:
+    """The world points (the scan's `positions`, in the order of `dets`) of the measurements that
+    arrived in this call: all of the scan's when it runs for the first time, the new ones when it
+    runs again with more (a seq is accepted once: admission refuses duplicates). `seqs`: dets'
+    seqs where the scan's gates hold them already (Gates.det_seqs), else None."""
+    if seqs is None:
+        seqs = seqs_of(dets)
+    if again:
+        new = np.isin(seqs, seqs_of(arrived))
+        seqs, positions = seqs[new], positions[new]
+    return ScanPoints(key[1], key[0], seqs, positions)
