@@ -39,7 +39,7 @@ def withdrawals_first(events: list[TrackEvent]) -> tuple[TrackEvent, ...]:
 
 
 def new_points(key: ScanKey, dets: tuple[Detection, ...], arrived: list[Detection], again: bool,
-                positions: np.ndarray, seqs: np.ndarray | None) -> ScanPoints:
+               positions: np.ndarray, seqs: np.ndarray | None) -> ScanPoints:
     """The world points (the scan's `positions`, in the order of `dets`) of the measurements that
     arrived in this call: all of the scan's when it runs for the first time, the new ones when it
     runs again with more (a seq is accepted once: admission refuses duplicates). `seqs`: dets'

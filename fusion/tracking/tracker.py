@@ -200,7 +200,7 @@ class Tracker:
             gates = part.gates if part is not None else gates_of_run(ts, dets, out)
             if arrived:
                 points.append(new_points(key, dets, arrived, prev is not None, out.positions,
-                                          None if gates is None else gates.det_seqs))
+                                         None if gates is None else gates.det_seqs))
             entry = Entry(key, dets, ts, tally=out.tally, associations=out.associations, gates=gates)
             estimates.extend(revise(entry, prev, out.estimates, kept, out.signatures))
             events.extend(revise_events(entry, prev, out.events, kept))
