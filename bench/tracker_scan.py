@@ -50,11 +50,17 @@ def shipped_config(*, cv: bool = False) -> TrackerConfig:
     return msgspec.structs.replace(cfg, motion=CV_MOTION) if cv else cfg
 
 
+ARRIVAL_NS = 1_000_000  # each scan arrives 1 ms after its time
+
+
 def shipped_scans(n_targets: int, n_scans: int, *, seed: int = 1) -> list[list[Detection]]:
-    """The first n_scans scans of bench.e2e_load's scene, decoded as the service decodes them."""
+    """The first n_scans scans of bench.e2e_load's scene, decoded as the service decodes them:
+    stamped with their arrival time (ARRIVAL_NS after the scan's), so that the intake runs the
+    service's path (its clocks and window in one compiled pass; without arrival times they go one
+    detection at a time, a path only direct callers of Tracker take)."""
     out: list[list[Detection]] = []
-    for _, _, payloads in Scene(n_targets, seed).ticks(1 << 60):
-        out.append([detection_of(m.decode_measurement(p)) for p in payloads])
+    for t_ns, _, payloads in Scene(n_targets, seed).ticks(1 << 60):
+        out.append([detection_of(m.decode_measurement(p), t_ns + ARRIVAL_NS) for p in payloads])
         if len(out) == n_scans:
             return out
     raise AssertionError("the scene ended")
