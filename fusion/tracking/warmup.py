@@ -12,7 +12,8 @@ take runs once:
     association, updates, confirmation (the scene lasts longer than confirm_n scans), the
     lifecycle sweep;
   - one measurement held back and delivered late: the (selective) replay;
-  - the same measurement again: the duplicate refusal;
+  - the same measurement again, without its arrival time: the intake's pass for callers of
+    Tracker that have none (fusion.tracking.window_kernel), and the duplicate refusal;
   - `predict` ahead of the newest scan: what the snapshot queryable and periodic publication run.
 The scene: three targets per sensor in straight flight at 5 m/s, 300 m from the sensor (the centre
 of its declared coverage when it has one), seen every 100 ms of sensor time for 1.2 s, with z =
@@ -122,7 +123,7 @@ def warm_up(config: TrackerConfig) -> WarmUp:
     for k in range(half, len(data), 2):  # two scans per call, as a batch of the service's drains
         calls.append([d for kk in (k, k + 1) if kk < len(data) for d in data[kk] if d is not held])
     calls.append([held])  # late: replayed from its scan on
-    calls.append([held])  # again: a duplicate, refused
+    calls.append([held._replace(arrival_ns=None)])  # again, untimed: a duplicate, refused
     for batch in calls:
         tracker.process(batch)
     newest = data[-1][0].t_ns

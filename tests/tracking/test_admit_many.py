@@ -77,13 +77,23 @@ def _stream(rng: np.random.Generator, n: int, *, no_arrival: float) -> list[Dete
     return out
 
 
-@pytest.mark.parametrize("seed", range(8))
+def _not_one_at_a_time(*_args: object) -> None:
+    raise AssertionError("a batch of detections all with or all without arrival times went one at a time")
+
+
+@pytest.mark.parametrize("seed", range(12))
 def test_admit_many_is_admit_one_at_a_time(seed: int) -> None:
     rng = np.random.default_rng(seed)
     samples, outliers = int(rng.integers(1, 17)), 0
     outliers = int(rng.integers(0, samples))
     one, many = _intake(samples, outliers), _intake(samples, outliers)
+    if seed % 4 in (0, 3):  # every batch all with or all without arrival times: the compiled pass takes them all
+        many._window = _not_one_at_a_time  # type: ignore[method-assign]
     dets = _stream(rng, 3000, no_arrival=0.002 if seed % 2 else 0.0)
+    if seed % 4 == 2:  # without arrival times from the middle on (the clocks hold timed offsets then)
+        dets = dets[:1500] + [d._replace(arrival_ns=None) for d in dets[1500:]]
+    elif seed % 4 == 3:  # none at all: a caller of Tracker without them
+        dets = [d._replace(arrival_ns=None) for d in dets]
     k = 0
     while k < len(dets):
         batch = dets[k:k + int(rng.integers(1, 300))]
@@ -140,3 +150,28 @@ def test_ties_at_the_idle_bound_are_the_pythons() -> None:
     # waited for radar1 until idle_s after the first arrival, then cam1's clock alone; radar1's
     # lower clock holds it back while it was heard within idle_s, the bound included
     assert horizons == [None, None, t0 + idle - lag, t0 + idle - lag, t0 + 2 * idle + G - 10 * G - lag]
+
+
+def test_detections_without_arrival_times_after_timed_ones() -> None:
+    """A batch without arrival times after timed ones (a caller mixing the two): the compiled
+    pass forgets the last arrival of each source it observes, as the clocks do, and judges by
+    the offsets the timed detections left."""
+    one, many = _intake(8, 1), _intake(8, 1)
+    many._window = _not_one_at_a_time  # type: ignore[method-assign]
+    t0, z = 10**18, np.array([10.0, 20.0])
+    timed = [Detection(s, t0 + k * G, k, np.array([500.0, 0.1]) if s == "radar1" else z, None, t0 + k * G + G, 0,
+                       s == "radar1") for k, s in enumerate(["radar1", "cam1"] * 6)]
+    untimed = [Detection("radar1", t0 + (12 + k) * G, 12 + k, np.array([500.0, 0.1]), None, None, 0, True)
+               for k in range(4)] + [Detection("radar1", t0 - 100 * G, 99, np.array([500.0, 0.1]), None, None, 0, True)]
+    for batch in (timed, untimed):
+        want = [one.admit(d) for d in batch]
+        got_ok, got_bad = many.admit_many(batch)
+        assert [_key(d) for d in got_ok] == [_key(d) for d, bad in want if bad is None]
+        assert got_bad == [bad for _, bad in want if bad is not None]
+        assert _state(many) == _state(one)
+    assert one.clocks.sources["radar1"].last_arrival_ns is None
+    assert one.clocks.sources["cam1"].last_arrival_ns is not None
+    # the first is judged by the offsets the timed ones left (about -50 ms: its sensor time,
+    # 10^18 ns, is that far ahead of the clock: future), the rest by the clock once its own
+    # offsets lead it; the last one too late
+    assert [(b.reason.value, b.seq) for b in got_bad] == [("future", 12), ("too_late", 99)]
