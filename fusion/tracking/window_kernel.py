@@ -13,8 +13,13 @@ order, each with its arrival time a_i known (fusion.tracking.clock, fusion.track
         while a source not yet heard may still start: a_i - first arrival < idle); the horizon
         = max(horizon, watermark - lag);
     too late when t_i < horizon (code 2) or (t_i, s) <= the committed scan (code 3).
-`steps_untimed` is the same for detections without arrival times (its docstring). The same
-integer arithmetic in the same order as the Python, on int64: `window_steps` takes
+Without arrival times (a batch with none: `timed` False; fusion.tracking.clock: the offset is
+t_i itself, a source's clock its offset) each detection is observed first (it always counts, and
+its source's last arrival becomes unknown), then
+    ref_i = offset_s (s settled), else the largest offset of the other settled sources, else offset_s;
+    now and future as above; the watermark: the smallest clock within idle of the most advanced
+        one; the horizon and too late as above (the first arrival is left as it is).
+The same integer arithmetic in the same order as the Python, on int64: `window_steps` takes
 the detections only when every time, offset and bound is within the limits below, so that no
 sum overflows (otherwise Intake.admit_many takes them one at a time, in Python's integers).
 Sources are indexed in sorted order of their ids, so comparing (t, source) with the committed
@@ -34,154 +39,108 @@ PASSED, FUTURE, HORIZON, COMMITTED = 0, 1, 2, 3
 
 
 @njit(cache=True, fastmath=False)
-def _observe(s: int, o: int, ring: np.ndarray, start: np.ndarray, count: np.ndarray, srt: np.ndarray,
-             offset: np.ndarray, has_offset: np.ndarray, rank: int) -> None:
-    """Offset o into source s's ring (the oldest leaving it when full) and its sorted copy (after
-    the equal ones, as bisect.insort), and the source's offset: the rank-th largest."""
-    cap = ring.shape[1]
-    c = count[s]
-    if c == cap:  # the oldest leaves the ring and its sorted copy
-        old = ring[s, start[s]]
-        j = 0
-        while srt[s, j] < old:
-            j += 1
-        for k in range(j, c - 1):
-            srt[s, k] = srt[s, k + 1]
-        ring[s, start[s]] = o
-        start[s] = (start[s] + 1) % cap
-        c -= 1
-    else:
-        ring[s, (start[s] + c) % cap] = o
-    j = c  # insort: after the equal ones
-    while j > 0 and srt[s, j - 1] > o:
-        srt[s, j] = srt[s, j - 1]
-        j -= 1
-    srt[s, j] = o
-    c += 1
-    count[s] = c
-    offset[s], has_offset[s] = srt[s, max(c - rank, 0)], True
-
-
-@njit(cache=True, fastmath=False)
-def _raise_horizon(w: int, scalars: np.ndarray, flags: np.ndarray) -> None:
-    """horizon = max(horizon, w)."""
-    if not flags[2] or w > scalars[2]:
-        scalars[2], flags[2] = w, True
-
-
-@njit(cache=True, fastmath=False)
-def _judge(i: int, s: int, ti: int, scalars: np.ndarray, flags: np.ndarray, code: np.ndarray, value: np.ndarray
-           ) -> None:
-    """Detection i (source s, time ti) too late once there is a horizon: before it (code 2, with
-    the horizon), or at or before the committed scan (code 3)."""
-    if flags[2]:
-        if ti < scalars[2]:
-            code[i], value[i] = HORIZON, scalars[2]
-        elif flags[3] and (ti < scalars[3] or (ti == scalars[3] and s <= scalars[4])):
-            code[i] = COMMITTED
-
-
-@njit(cache=True, fastmath=False)
 def steps(src: np.ndarray, t: np.ndarray, a: np.ndarray, ring: np.ndarray, start: np.ndarray, count: np.ndarray,
           srt: np.ndarray, last: np.ndarray, has_last: np.ndarray, offset: np.ndarray, has_offset: np.ndarray,
-          rank: int, idle: int, future: int, lag: int, scalars: np.ndarray, flags: np.ndarray
+          rank: int, idle: int, future: int, lag: int, scalars: np.ndarray, flags: np.ndarray, timed: bool
           ) -> tuple[np.ndarray, np.ndarray]:
     """(code, value) of every detection (module docstring; value: ref for code 1, the horizon
     for code 2), updating the clock arrays (per source: ring (S, samples) from `start`, `count`
     of them, srt[:count] sorted, last arrival, offset, each with its flag) and `scalars` =
     [first arrival, now, horizon, committed t, committed source] with `flags` saying which
-    are known, in place."""
+    are known, in place. `timed`: with the arrival times `a`; else none (a all 0), as the
+    module docstring says for detections without them (one kernel for both: the loop's shared
+    parts written once, where helper calls cost the timed loop half its speed)."""
     n = t.shape[0]
     S = ring.shape[0]
+    cap = ring.shape[1]
     code = np.zeros(n, dtype=np.int64)
     value = np.zeros(n, dtype=np.int64)
     for i in range(n):
         s, ti, ai = src[i], t[i], a[i]
         # the reference: the source's own clock once settled, else the most advanced other settled one
+        # (untimed: taken after observing, below)
         has_ref = False
         ref = 0
-        if count[s] >= rank:
-            ref, has_ref = ai + offset[s], True
-        else:
-            for k in range(S):
-                if k != s and count[k] >= rank and (not has_ref or ai + offset[k] > ref):
-                    ref, has_ref = ai + offset[k], True
-            if not has_ref and has_offset[s]:
+        if timed:
+            if count[s] >= rank:
                 ref, has_ref = ai + offset[s], True
-        if not has_ref or ti <= ref + future:  # observe
-            if not flags[0]:
+            else:
+                for k in range(S):
+                    if k != s and count[k] >= rank and (not has_ref or ai + offset[k] > ref):
+                        ref, has_ref = ai + offset[k], True
+                if not has_ref and has_offset[s]:
+                    ref, has_ref = ai + offset[s], True
+        if not has_ref or ti <= ref + future:  # observe (untimed: always)
+            if timed and not flags[0]:
                 scalars[0], flags[0] = ai, True
-            _observe(s, ti - ai, ring, start, count, srt, offset, has_offset, rank)
-            last[s], has_last[s] = ai, True
+            o = ti - ai
+            c = count[s]
+            if c == cap:  # the oldest leaves the ring and its sorted copy
+                old = ring[s, start[s]]
+                j = 0
+                while srt[s, j] < old:
+                    j += 1
+                for k in range(j, c - 1):
+                    srt[s, k] = srt[s, k + 1]
+                ring[s, start[s]] = o
+                start[s] = (start[s] + 1) % cap
+                c -= 1
+            else:
+                ring[s, (start[s] + c) % cap] = o
+            j = c  # insort: after the equal ones
+            while j > 0 and srt[s, j - 1] > o:
+                srt[s, j] = srt[s, j - 1]
+                j -= 1
+            srt[s, j] = o
+            c += 1
+            count[s] = c
+            last[s], has_last[s] = ai, timed  # untimed: its last arrival unknown
+            offset[s], has_offset[s] = srt[s, max(c - rank, 0)], True
+        if not timed:  # its own clock once settled, else the most advanced other settled one, else its own
+            ref, has_ref = offset[s], True
+            if count[s] < rank:
+                other = False
+                for k in range(S):
+                    if k != s and count[k] >= rank and (not other or offset[k] > ref):
+                        ref, other = offset[k], True
         if has_ref:
             if not flags[1] or ref > scalars[1]:
                 scalars[1], flags[1] = ref, True
             if ti > ref + future:
                 code[i], value[i] = FUTURE, ref
                 continue
-        # the watermark at this arrival
+        # the watermark (timed: at this arrival; untimed: the smallest clock within idle of the newest)
         has_low, low, wait = False, 0, False
-        for k in range(S):
-            if not has_last[k]:
-                if flags[0] and ai - scalars[0] < idle:
-                    wait = True
-                    break
-                continue
-            if ai - last[k] > idle:
-                continue
-            if not has_low or offset[k] < low:
-                low, has_low = offset[k], True
-        if not wait and has_low:
-            _raise_horizon(ai + low - lag, scalars, flags)
-        _judge(i, s, ti, scalars, flags, code, value)
-    return code, value
-
-
-@njit(cache=True, fastmath=False)
-def steps_untimed(src: np.ndarray, t: np.ndarray, ring: np.ndarray, start: np.ndarray, count: np.ndarray,
-                  srt: np.ndarray, has_last: np.ndarray, offset: np.ndarray, has_offset: np.ndarray, rank: int,
-                  idle: int, future: int, lag: int, scalars: np.ndarray, flags: np.ndarray
-                  ) -> tuple[np.ndarray, np.ndarray]:
-    """`steps` for detections without arrival times (fusion.tracking.clock: the offset is t_i
-    itself and a source's clock its offset): each is observed first (it always counts, and its
-    source's last arrival becomes unknown), then
-        ref_i = offset_s (s settled) = the largest offset of the other settled sources, else
-                offset_s;
-        now = max(now, ref_i); future (code 1) when t_i > ref_i + future;
-        the watermark: the smallest clock within idle of the most advanced one; the horizon =
-        max(horizon, watermark - lag); too late as in `steps`.
-    The first arrival (scalars[0]) is left as it is."""
-    n = t.shape[0]
-    S = ring.shape[0]
-    code = np.zeros(n, dtype=np.int64)
-    value = np.zeros(n, dtype=np.int64)
-    for i in range(n):
-        s, ti = src[i], t[i]
-        _observe(s, ti, ring, start, count, srt, offset, has_offset, rank)
-        has_last[s] = False
-        ref = offset[s]
-        if count[s] < rank:
-            has_ref = False
+        if timed:
             for k in range(S):
-                if k != s and count[k] >= rank and (not has_ref or offset[k] > ref):
-                    ref, has_ref = offset[k], True
-            if not has_ref:
-                ref = offset[s]
-        if not flags[1] or ref > scalars[1]:
-            scalars[1], flags[1] = ref, True
-        if ti > ref + future:
-            code[i], value[i] = FUTURE, ref
-            continue
-        newest = offset[s]
-        for k in range(S):
-            if has_offset[k] and offset[k] > newest:
-                newest = offset[k]
-        low = newest
-        for k in range(S):
-            if has_offset[k] and offset[k] >= newest - idle and offset[k] < low:
-                low = offset[k]
-        _raise_horizon(low - lag, scalars, flags)
-        _judge(i, s, ti, scalars, flags, code, value)
+                if not has_last[k]:
+                    if flags[0] and ai - scalars[0] < idle:
+                        wait = True
+                        break
+                    continue
+                if ai - last[k] > idle:
+                    continue
+                if not has_low or offset[k] < low:
+                    low, has_low = offset[k], True
+        else:
+            newest = offset[s]
+            for k in range(S):
+                if has_offset[k] and offset[k] > newest:
+                    newest = offset[k]
+            low, has_low = newest, True
+            for k in range(S):
+                if has_offset[k] and offset[k] >= newest - idle and offset[k] < low:
+                    low = offset[k]
+        if not wait and has_low:
+            w = ai + low - lag
+            if not flags[2] or w > scalars[2]:
+                scalars[2], flags[2] = w, True
+        if flags[2]:
+            if ti < scalars[2]:
+                code[i], value[i] = HORIZON, scalars[2]
+                continue
+            if flags[3] and (ti < scalars[3] or (ti == scalars[3] and s <= scalars[4])):
+                code[i] = COMMITTED
     return code, value
 
 
@@ -204,7 +163,7 @@ def window_steps(clocks: Clocks, source: list[str], t_ns: list[int], arrival_ns:
                  future_ns: int, lag_ns: int, now_ns: int | None, horizon_ns: int | None,
                  committed: tuple[int, str] | None) -> Window | None:
     """`steps` over detections (source, t_ns, arrival_ns), from and back into `clocks` (through
-    their public state and restore), or `steps_untimed` when no detection has an arrival time;
+    their public state and restore), untimed when no detection has an arrival time;
     None, with nothing changed, when some have one and others not, or a value is beyond the
     limits above (the caller then takes them one at a time)."""
     names = list(clocks.sources)  # sorted ids: index order is the ids' order
@@ -256,12 +215,8 @@ def window_steps(clocks: Clocks, source: list[str], t_ns: list[int], arrival_ns:
     scalars = np.array([0 if v is None else v for v in known], np.int64)
     flags = np.array([v is not None for v in known], np.bool_)
     start = np.zeros(S, np.int64)
-    if untimed:
-        code, value = steps_untimed(src, t, ring, start, count, srt, has_last, offset, has_offset,
-                                    clocks.outliers + 1, clocks.idle_ns, future_ns, lag_ns, scalars, flags)
-    else:
-        code, value = steps(src, t, a, ring, start, count, srt, last, has_last, offset, has_offset,
-                            clocks.outliers + 1, clocks.idle_ns, future_ns, lag_ns, scalars, flags)
+    code, value = steps(src, t, a, ring, start, count, srt, last, has_last, offset, has_offset,
+                        clocks.outliers + 1, clocks.idle_ns, future_ns, lag_ns, scalars, flags, not untimed)
     for k, name in enumerate(names):
         c, s0 = int(count[k]), int(start[k])
         clocks.sources[name].restore([int(ring[k, (s0 + j) % cap]) for j in range(c)],
