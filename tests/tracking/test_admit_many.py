@@ -171,7 +171,8 @@ def test_detections_without_arrival_times_after_timed_ones() -> None:
         assert _state(many) == _state(one)
     assert one.clocks.sources["radar1"].last_arrival_ns is None
     assert one.clocks.sources["cam1"].last_arrival_ns is not None
-    # the first is judged by the offsets the timed ones left (about -50 ms: its sensor time,
-    # 10^18 ns, is that far ahead of the clock: future), the rest by the clock once its own
-    # offsets lead it; the last one too late
+    # the first is judged by radar1's clock as the timed ones left it: offset -50 ms (they
+    # arrived 50 ms after their time), so without an arrival time the reference is -50 ms and
+    # its sensor time, 10^18 ns, is far ahead of it (future); the rest by the clock once their
+    # own offsets lead it; the last one too late
     assert [(b.reason.value, b.seq) for b in got_bad] == [("future", 12), ("too_late", 99)]
