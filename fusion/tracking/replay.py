@@ -189,8 +189,7 @@ def rerun(ts: TrackSet, key: ScanKey, dets: tuple[Detection, ...], ctx: ScanCont
     if old.tally[Tally.BIRTHS_REFUSED_CAPACITY] or old.tally[Tally.NUMERICAL_SKIPS]:
         return None  # the old run's counts are not per component: run the whole scan
     old_gates = old.gates if old.gates is not None else gates_of(old.before, key, old.dets, ctx)
-    old_seqs = old_gates.det_seqs if old_gates.det_seqs is not None else \
-        seqs_of(old.dets)
+    old_seqs = old_gates.det_seqs if old_gates.det_seqs is not None else seqs_of(old.dets)
     if len(dets) == len(old.dets):  # dets hold old.dets: the same detections
         seqs, old_j = old_seqs, np.arange(len(dets))
     else:

@@ -10,6 +10,7 @@ import numpy as np
 
 from fusion.tracking.detection import SEQ, Detection, seqs_of
 from fusion.tracking.history import Entry
+from fusion.tracking.id_sets import member
 from fusion.tracking.results import ScanKey, ScanPoints, TrackEvent
 
 
@@ -20,8 +21,10 @@ def merged(prev: Entry | None, arrived: list[Detection] | None) -> tuple[Detecti
     (a late measurement joins a scan of hundreds)."""
     if prev is None:
         return tuple(sorted(arrived or (), key=SEQ))
+    if not arrived:  # nothing new: the stored scan as it is
+        return prev.dets
     out = list(prev.dets)
-    for d in sorted(arrived or (), key=SEQ):
+    for d in sorted(arrived, key=SEQ):
         insort(out, d, key=SEQ)
     return tuple(out)
 
@@ -47,6 +50,6 @@ def new_points(key: ScanKey, dets: tuple[Detection, ...], arrived: list[Detectio
     if seqs is None:
         seqs = seqs_of(dets)
     if again:
-        new = np.isin(seqs, seqs_of(arrived))
+        new = member(seqs, seqs_of(arrived))
         seqs, positions = seqs[new], positions[new]
     return ScanPoints(key[1], key[0], seqs, positions)

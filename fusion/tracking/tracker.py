@@ -192,7 +192,7 @@ class Tracker:
         for key in rw.keys:
             prev = rw.old.get(key)
             arrived = scans.get(key)
-            dets = prev.dets if arrived is None and prev is not None else merged(prev, arrived)
+            dets = merged(prev, arrived)
             part = self._rerun(ts, key, dets, prev, rw.after.get(key), hint)
             out = part.outcome if part is not None else run_scan(ts, key, dets, self.ctx)
             kept = part.kept if part is not None else frozenset()
