@@ -210,7 +210,8 @@ class LatencyStats(Base, kw_only=True):
 
 
 class Counts(Base, kw_only=True):
-    """received = applied + truth + duplicates + sum(refused.values()) + queued."""
+    """received = applied + inputs + truth + duplicates + sum(refused.values()) + queued (inputs:
+    control inputs applied; 0 from a service before they were counted here)."""
 
     received: int
     applied: int
@@ -221,6 +222,7 @@ class Counts(Base, kw_only=True):
     late_applied: int
     published: int
     truth: int
+    inputs: int = 0
 
 
 class SeqGapStats(Base, kw_only=True):

@@ -405,7 +405,7 @@ class Service:
         return out
 
     def status_dict(self) -> dict[str, Any]:
-        """Counts add up: received = applied + truth + duplicates + sum(refused) + queued."""
+        """Counts add up: received = applied + inputs + truth + duplicates + sum(refused) + queued."""
         c = self._run_counts()
         refused = {r.value: n for r, n in c.refused.items() if r != Reason.DUPLICATE}
         intake = self._intake_refused()
@@ -422,7 +422,7 @@ class Service:
                 "received": arrived, "applied": c.applied, "duplicates": c.duplicates,
                 "refused": refused, "queued": queued, "replays": c.replays,
                 "late_applied": c.late_applied, "published": self.published,
-                "truth": c.truth,
+                "truth": c.truth, "inputs": c.inputs,
             },
             "tracks": dict(sorted(by_status.items())),
             "latency": self.pipeline.latency.stats(),

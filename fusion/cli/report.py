@@ -15,17 +15,20 @@ from fusion.tracking.results import Counts
 
 
 def counts_line(c: Mapping[str, Any]) -> str:
-    """received = applied + truth + duplicates + refused + queued, said for measurements (the
-    truth samples a simulator sends beside them are not measurements)."""
+    """received = applied + inputs + truth + duplicates + refused + queued, said for measurements
+    (the truth samples a simulator sends beside them are not measurements; control inputs are
+    said apart)."""
     refused: Mapping[str, int] = c.get("refused", {})
     n_ref = sum(refused.values())
-    measurements = c["received"] - int(c.get("truth", 0))
+    inputs = int(c.get("inputs", 0))
+    measurements = c["received"] - int(c.get("truth", 0)) - inputs
     parts = [f"{c['applied']} applied", f"{c['duplicates']} duplicates dropped",
              f"{n_ref} refused" + (" (" + ", ".join(f"{k} {v}" for k, v in sorted(refused.items())) + ")"
                                    if refused else "")]
     if c.get("queued"):
         parts.append(f"{c['queued']} not yet processed")
-    line = f"received {measurements} measurements: " + ", ".join(parts)
+    line = (f"received {measurements} measurements" + (f" and {inputs} control inputs" if inputs else "") + ": "
+            + ", ".join(parts))
     if c.get("late_applied"):
         line += f"; {c['late_applied']} late ones folded in by {c['replays']} replay{'s' if c['replays'] != 1 else ''}"
     return line + f"; published {c['published']} estimates"
@@ -36,7 +39,8 @@ def flat_counts(c: Counts, *, published: int) -> dict[str, Any]:
     duplicates apart from the other refusals, reasons that did not happen left out."""
     refused = {r.value: n for r, n in sorted(c.refused.items()) if n and r != Reason.DUPLICATE}
     return {"received": c.received, "applied": c.applied, "duplicates": c.duplicates, "refused": refused,
-            "truth": c.truth, "late_applied": c.late_applied, "replays": c.replays, "published": published}
+            "truth": c.truth, "inputs": c.inputs, "late_applied": c.late_applied, "replays": c.replays,
+            "published": published}
 
 
 def size(n_bytes: int) -> str:
@@ -56,7 +60,7 @@ def format_status(st: m.ServiceStatus, namespace: str) -> str:
     tracks = ", ".join(f"{v} {k}" for k, v in sorted(st.tracks.items())) or "none"
     counts = {"received": c.received, "applied": c.applied, "duplicates": c.duplicates, "refused": c.refused,
               "queued": c.queued, "late_applied": c.late_applied, "replays": c.replays, "published": c.published,
-              "truth": c.truth}
+              "truth": c.truth, "inputs": c.inputs}
     lines = [
         f"fusion service on namespace {namespace!r}, up {duration(st.uptime_s)}",
         f"  samples    {counts_line(counts)}",

@@ -30,9 +30,9 @@ examples:
   fusion serve -c configs/service.toml -m client -e tcp/ROUTER:7447  # join a Zenoh router"""
 
 RECORD_DESCRIPTION = """\
-Record every measurement and truth sample published on a namespace, with its arrival time, to a
-stream file (.fstream) that `fusion replay` feeds through the tracker. Runs until Ctrl-C or
---duration. Needs something to connect to: by default the `fusion serve` on this machine."""
+Record every measurement, control input and truth sample published on a namespace, with its
+arrival time, to a stream file (.fstream) that `fusion replay` feeds through the tracker. Runs
+until Ctrl-C or --duration. Needs something to connect to: by default the `fusion serve` on this machine."""
 
 RECORD_EXAMPLES = """\
 examples:
@@ -135,14 +135,18 @@ def record(args: argparse.Namespace) -> int:
     deadline = None if args.duration is None else time.monotonic() + args.duration
     with zenoh.open(zenoh_session_config(zc, namespace=args.namespace)) as session:
         rec = Recorder(session, out, namespace=args.namespace)
-        print(f"recording fusion/{args.namespace}/meas/* and truth/* to {out}; Ctrl-C to stop", flush=True)
+        print(f"recording fusion/{args.namespace}/meas/*, input/* and truth/* to {out}; Ctrl-C to stop", flush=True)
         with bar(enabled=wanted(args), desc="recorded", unit="sample") as b:
             while not stop.wait(0.2 if deadline is None else max(0.0, min(0.2, deadline - time.monotonic()))):
                 b(rec.records)
                 if deadline is not None and time.monotonic() >= deadline:
                     break
+        missed = rec.missed()
         rec.close()
     print(f"recorded {rec.records} samples to {out}")
+    if missed:
+        print("lost on the network and not recovered from the publishers' caches: "
+              + ", ".join(f"{k} {n}" for k, n in missed.items()))
     if rec.records:
         print(f"replay them with:  fusion replay {out}")
     else:

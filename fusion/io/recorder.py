@@ -1,5 +1,12 @@
-"""`fusion record`: every measurement and truth sample on a namespace, with its arrival time,
-into a stream file (fusion.io.streamfile). Callbacks only enqueue; one thread writes."""
+"""`fusion record`: every measurement, control input and truth sample on a namespace, with its
+arrival time, into a stream file (fusion.io.streamfile), so that `fusion replay` runs what the
+service ran (before, inputs were not recorded, and a replay of a stream with control inputs
+predicted without them). Callbacks only enqueue; one thread writes.
+
+Measurements and inputs come through the service's kind of subscription (fusion.io.zenoh_advanced): a
+publisher (publishers.publish) sees it announced and starts at once (with a plain subscriber it
+waited its whole match timeout, 10 s, and warned that no subscriber matched), and a sample the
+network dropped is recovered from the publisher's cache, as the service recovers it."""
 
 from __future__ import annotations
 
@@ -11,10 +18,11 @@ from typing import Any
 
 from fusion import messages as m
 from fusion.io.streamfile import StreamWriter
+from fusion.io.zenoh_advanced import RecoveringSubscription
 
 
 class Recorder:
-    """Subscribes on `session` to fusion/<ns>/meas/* and truth/*; `close()` drains and closes."""
+    """Subscribes on `session` to fusion/<ns>/meas/*, input/* and truth/*; `close()` drains and closes."""
 
     def __init__(self, session: Any, path: str | Path, *, namespace: str) -> None:
         self._q: queue.SimpleQueue[tuple[int, str, bytes] | None] = queue.SimpleQueue()
@@ -22,8 +30,9 @@ class Recorder:
         self._thread = threading.Thread(target=self._write, name="fusion-recorder", daemon=True)
         self._thread.start()
         cb = self._on_sample
-        self._subs = [session.declare_subscriber(m.all_meas_key(namespace), cb),
-                      session.declare_subscriber(m.all_truth_key(namespace), cb)]
+        self._recovering = [RecoveringSubscription(session, m.all_meas_key(namespace), cb),
+                            RecoveringSubscription(session, m.all_input_key(namespace), cb)]
+        self._subs = [*self._recovering, session.declare_subscriber(m.all_truth_key(namespace), cb)]
 
     def _on_sample(self, sample: Any) -> None:
         self._q.put((time.time_ns(), str(sample.key_expr), sample.payload.to_bytes()))
@@ -38,6 +47,15 @@ class Recorder:
     @property
     def records(self) -> int:
         return self.writer.records
+
+    def missed(self) -> dict[str, int]:
+        """Measurements and inputs zenoh reported lost and not recovered, by the key's last
+        segment (sensor or input source; none, usually)."""
+        out: dict[str, int] = {}
+        for sub in self._recovering:
+            for k, n in sub.missed().items():
+                out[k] = out.get(k, 0) + n
+        return dict(sorted(out.items()))
 
     def close(self) -> None:
         for s in self._subs:

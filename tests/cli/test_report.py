@@ -32,6 +32,14 @@ def test_queued_and_no_late() -> None:
                               "processed; published 389 estimates")
 
 
+def test_control_inputs_are_said_apart() -> None:
+    """A stream with control inputs (cv1d_d): the line's parts add up to the measurements."""
+    c = Counts(received=300, truth=100, inputs=100, applied=100)
+    assert counts_line(flat_counts(c, published=99)) == ("received 100 measurements and 100 control inputs: "
+                                                         "100 applied, 0 duplicates dropped, 0 refused; "
+                                                         "published 99 estimates")
+
+
 def _estimate(track_id: int, x: float) -> m.Estimate:
     return m.Estimate(track_id=track_id, t_ns=2_500_000_000, sensor_id="cam1", seq=3, state=[x, 1.0, 2.0, -1.0],
                       cov=[4.0, 0, 0, 0, 0, 1.0, 0, 0, 0, 0, 5.0, 0, 0, 0, 0, 1.0], layout=["x", "vx", "y", "vy"],

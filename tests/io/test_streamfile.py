@@ -154,16 +154,22 @@ def test_jsonl(tmp_path: Path) -> None:
         list(read_records(bad, namespace="t")[0])
 
 
-def test_recorder_over_zenoh(tmp_path: Path, zenoh_hub: tuple, zenoh_client: Any) -> None:
+@pytest.mark.parametrize("name", ["radar2d", "cv1d_d"])  # cv1d_d has control inputs
+def test_recorder_over_zenoh(name: str, tmp_path: Path, zenoh_hub: tuple, zenoh_client: Any,
+                             caplog: pytest.LogCaptureFixture) -> None:
     hub, _ = zenoh_hub
-    sf = load_scenario_file(scenario_path("radar2d"))
+    sf = load_scenario_file(scenario_path(name))
     samples, _ = build_stream(sf.scenario, namespace="t")
     rec = Recorder(hub, tmp_path / "r.fstream", namespace="t")
     try:
-        publish(zenoh_client(), samples, speed=0.0, match_timeout_s=5.0)
+        with caplog.at_level(logging.WARNING, logger="publishers"):
+            publish(zenoh_client(), samples, speed=0.0, match_timeout_s=5.0)
+        # the recorder is announced as the service is: the publisher did not wait out its timeout
+        assert not [r for r in caplog.records if "no subscriber matched" in r.message]
         deadline = time.monotonic() + 5.0
         while rec.records < len(samples) and time.monotonic() < deadline:
             time.sleep(0.01)
+        assert rec.missed() == {}
     finally:
         rec.close()
     got = list(StreamReader(tmp_path / "r.fstream"))

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import itertools
+import logging
 import threading
 import time
 from collections import Counter, defaultdict
@@ -12,6 +13,7 @@ import msgspec
 import pytest
 
 from fusion import messages as m
+from fusion.io.zenoh_advanced import RecoveringSubscription
 from fusion.scenarios import REFERENCE_NAMES
 from publishers.publish import publish
 from publishers.spec import (
@@ -78,7 +80,10 @@ def test_sensor_effects_are_seen() -> None:
     assert max(per_scan.values()) > 3, "no clutter"
 
 
-def _collect(session: Any, key: str) -> tuple[list[bytes], threading.Lock]:
+def _collect(session: Any, ns: str) -> tuple[list[bytes], threading.Lock]:
+    """The measurements on namespace `ns`, through the service's kind of subscription (the
+    publisher waits until it is announced), and subscribers on its inputs and truth (the
+    publisher waits for them too)."""
     got: list[bytes] = []
     lock = threading.Lock()
 
@@ -86,17 +91,22 @@ def _collect(session: Any, key: str) -> tuple[list[bytes], threading.Lock]:
         with lock:
             got.append(sample.payload.to_bytes())
 
-    session.declare_subscriber(key, cb)
+    RecoveringSubscription(session, m.all_meas_key(ns), cb)
+    RecoveringSubscription(session, m.all_input_key(ns), lambda sample: None)
+    session.declare_subscriber(m.all_truth_key(ns), lambda sample: None)
     return got, lock
 
 
 @pytest.mark.parametrize("name", REFERENCE_NAMES, ids=str)
-def test_every_message_is_delivered_over_zenoh(name: str, zenoh_hub: tuple, zenoh_client: Any) -> None:
+def test_every_message_is_delivered_over_zenoh(name: str, zenoh_hub: tuple, zenoh_client: Any,
+                                               caplog: pytest.LogCaptureFixture) -> None:
     hub, _ = zenoh_hub
-    got, lock = _collect(hub, "fusion/t/meas/*")
+    got, lock = _collect(hub, "t")
     sf = load_scenario_file(scenario_path(name))
     samples, _ = build_stream(sf.scenario, namespace="t")
-    counts = publish(zenoh_client(), samples, speed=0.0, match_timeout_s=5.0)
+    with caplog.at_level(logging.WARNING, logger="publishers"):
+        counts = publish(zenoh_client(), samples, speed=0.0, match_timeout_s=5.0)
+    assert not [r for r in caplog.records if "no subscriber matched" in r.message]  # it saw both announced
     expected = _meas(samples)
     deadline = time.monotonic() + 5.0
     while time.monotonic() < deadline:

@@ -16,7 +16,7 @@ from tests.service.test_crash import Served, _wait
 
 
 def _adds_up(c: m.Counts) -> bool:
-    return c.received == c.applied + c.truth + c.duplicates + sum(c.refused.values()) + c.queued
+    return c.received == c.applied + c.inputs + c.truth + c.duplicates + sum(c.refused.values()) + c.queued
 
 
 def test_a_publisher_in_a_crash_loop_costs_only_its_lost_samples(tmp_path: Path) -> None:

@@ -40,7 +40,7 @@ def radar(seq: int, t_ns: int) -> bytes:
 
 
 def adds_up(c: m.Counts) -> bool:
-    return c.received == c.applied + c.truth + c.duplicates + sum(c.refused.values()) + c.queued
+    return c.received == c.applied + c.inputs + c.truth + c.duplicates + sum(c.refused.values()) + c.queued
 
 
 def test_byte_limit_and_bounds_cover_every_key(tmp_path: Path) -> None:

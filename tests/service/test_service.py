@@ -58,7 +58,9 @@ def test_reference_scenario_end_to_end(name: str, tmp_path: Path) -> None:
     assert len(got) == svc.published > 0, "estimates published and received differ"
     st = svc.status_dict()["counts"]
     assert st["applied"] == n_meas and st["truth"] == sum(1 for s in samples if "/truth/" in s.key)
-    assert st["received"] == len(samples)
+    assert st["inputs"] == sum(1 for s in samples if "/input/" in s.key)  # cv1d_d's control inputs
+    assert st["received"] == len(samples) == (st["applied"] + st["inputs"] + st["truth"] + st["duplicates"]
+                                              + sum(st["refused"].values()) + st["queued"])
     # exactly what the tracker produces offline on the same input
     off_tracker = Tracker(cfg.tracker)
     offline = _offline(cfg, tmp_path / "live.fstream", tracker=off_tracker)
