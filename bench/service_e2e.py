@@ -31,7 +31,7 @@ from fusion import messages as m
 
 
 def _counts_add_up(c: m.Counts) -> bool:
-    return c.received == c.applied + c.truth + c.duplicates + sum(c.refused.values()) + c.queued
+    return c.received == c.applied + c.inputs + c.truth + c.duplicates + sum(c.refused.values()) + c.queued
 
 
 def throughput_run(pub: Publisher, folder: Path, *, n: int, targets: int, recording: bool, window_s: float,

@@ -32,7 +32,8 @@ examples:
 RECORD_DESCRIPTION = """\
 Record every measurement, control input and truth sample published on a namespace, with its
 arrival time, to a stream file (.fstream) that `fusion replay` feeds through the tracker. Runs
-until Ctrl-C or --duration. Needs something to connect to: by default the `fusion serve` on this machine."""
+until Ctrl-C or --duration. Needs something to connect to: by default the `fusion serve` on this
+machine."""
 
 RECORD_EXAMPLES = """\
 examples:

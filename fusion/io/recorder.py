@@ -3,10 +3,12 @@ arrival time, into a stream file (fusion.io.streamfile), so that `fusion replay`
 service ran (before, inputs were not recorded, and a replay of a stream with control inputs
 predicted without them). Callbacks only enqueue; one thread writes.
 
-Measurements and inputs come through the service's kind of subscription (fusion.io.zenoh_advanced): a
-publisher (publishers.publish) sees it announced and starts at once (with a plain subscriber it
-waited its whole match timeout, 10 s, and warned that no subscriber matched), and a sample the
-network dropped is recovered from the publisher's cache, as the service recovers it."""
+Measurements and inputs come through the service's kind of subscription
+(fusion.io.zenoh_advanced): a publisher (publishers.publish) sees it announced and starts at once
+(with a plain subscriber it waited its whole match timeout, 10 s, and warned that no subscriber
+matched); a sample the network dropped is recovered from the publisher's cache; and a recorder
+started after a publisher first gets what that cache still holds (fusion-publish keeps 1 000),
+stamped with the time they reach the recorder: the stream a service joining at that moment sees."""
 
 from __future__ import annotations
 
@@ -30,9 +32,9 @@ class Recorder:
         self._thread = threading.Thread(target=self._write, name="fusion-recorder", daemon=True)
         self._thread.start()
         cb = self._on_sample
-        self._recovering = [RecoveringSubscription(session, m.all_meas_key(namespace), cb),
-                            RecoveringSubscription(session, m.all_input_key(namespace), cb)]
-        self._subs = [*self._recovering, session.declare_subscriber(m.all_truth_key(namespace), cb)]
+        self._recovering = {"meas": RecoveringSubscription(session, m.all_meas_key(namespace), cb),
+                            "input": RecoveringSubscription(session, m.all_input_key(namespace), cb)}
+        self._subs = [*self._recovering.values(), session.declare_subscriber(m.all_truth_key(namespace), cb)]
 
     def _on_sample(self, sample: Any) -> None:
         self._q.put((time.time_ns(), str(sample.key_expr), sample.payload.to_bytes()))
@@ -49,13 +51,10 @@ class Recorder:
         return self.writer.records
 
     def missed(self) -> dict[str, int]:
-        """Measurements and inputs zenoh reported lost and not recovered, by the key's last
-        segment (sensor or input source; none, usually)."""
-        out: dict[str, int] = {}
-        for sub in self._recovering:
-            for k, n in sub.missed().items():
-                out[k] = out.get(k, 0) + n
-        return dict(sorted(out.items()))
+        """Measurements and inputs zenoh reported lost and not recovered, by "meas/<sensor>" and
+        "input/<source>" (none, usually)."""
+        return dict(sorted((f"{kind}/{k}", n) for kind, sub in self._recovering.items()
+                           for k, n in sub.missed().items()))
 
     def close(self) -> None:
         for s in self._subs:

@@ -80,10 +80,10 @@ def test_sensor_effects_are_seen() -> None:
     assert max(per_scan.values()) > 3, "no clutter"
 
 
-def _collect(session: Any, ns: str) -> tuple[list[bytes], threading.Lock]:
+def _collect(session: Any, ns: str) -> tuple[list[bytes], threading.Lock, list[Any]]:
     """The measurements on namespace `ns`, through the service's kind of subscription (the
     publisher waits until it is announced), and subscribers on its inputs and truth (the
-    publisher waits for them too)."""
+    publisher waits for them too); the subscriptions are returned for the caller to hold."""
     got: list[bytes] = []
     lock = threading.Lock()
 
@@ -91,17 +91,17 @@ def _collect(session: Any, ns: str) -> tuple[list[bytes], threading.Lock]:
         with lock:
             got.append(sample.payload.to_bytes())
 
-    RecoveringSubscription(session, m.all_meas_key(ns), cb)
-    RecoveringSubscription(session, m.all_input_key(ns), lambda sample: None)
-    session.declare_subscriber(m.all_truth_key(ns), lambda sample: None)
-    return got, lock
+    subs = [RecoveringSubscription(session, m.all_meas_key(ns), cb),
+            RecoveringSubscription(session, m.all_input_key(ns), lambda sample: None),
+            session.declare_subscriber(m.all_truth_key(ns), lambda sample: None)]
+    return got, lock, subs
 
 
 @pytest.mark.parametrize("name", REFERENCE_NAMES, ids=str)
 def test_every_message_is_delivered_over_zenoh(name: str, zenoh_hub: tuple, zenoh_client: Any,
                                                caplog: pytest.LogCaptureFixture) -> None:
     hub, _ = zenoh_hub
-    got, lock = _collect(hub, "t")
+    got, lock, _subs = _collect(hub, "t")
     sf = load_scenario_file(scenario_path(name))
     samples, _ = build_stream(sf.scenario, namespace="t")
     with caplog.at_level(logging.WARNING, logger="publishers"):
