@@ -395,7 +395,8 @@ class CheckpointConfig(Section):
     and resumed at start (same track ids; the status says how old the checkpoint was). path ""
     is <recording.directory>/<recording.prefix>.checkpoint for a service with rotating
     recordings, and no checkpoint for a one-file run (fusion demo) unless a path is given. A
-    checkpoint that cannot be used is moved aside and the service starts clean
+    checkpoint that cannot be used (damaged, of another tracker configuration, or written by the
+    service of another namespace) is moved aside and the service starts clean
     (fusion.io.checkpointer)."""
 
     enabled: bool = True

@@ -80,7 +80,8 @@ class Service:
         self.ns = config.namespace
         cp = service_checkpoint_path(config.checkpoint, config.recording, recording_dir=recording_dir,
                                      one_file=recording_path is not None)
-        self.checkpoints = None if cp is None else Checkpointer(cp, interval_s=config.checkpoint.interval_s)
+        self.checkpoints = None if cp is None else Checkpointer(cp, interval_s=config.checkpoint.interval_s,
+                                                                namespace=config.namespace)
         self.tracker = Tracker(config.tracker)  # the checkpoint's state, if any, is restored into it by open()
         self._where = (recording_dir, recording_path, stream_path)  # the files are created by open()
         self._out = Outputs(None, None, None, None)  # fusion.io.outputs

@@ -35,17 +35,20 @@ class CheckpointError(FusionError):
 class CheckpointFile(msgspec.Struct, frozen=True, forbid_unknown_fields=True, kw_only=True):
     written_wall_ns: int
     state: TrackerState
+    namespace: str = ""  # the service's, when a service wrote it ("": unknown, or not a service's)
 
 
 _enc = msgspec.msgpack.Encoder()
 _dec = msgspec.msgpack.Decoder(CheckpointFile)
 
 
-def write_checkpoint(path: str | Path, tracker: Tracker, *, now_wall_ns: int | None = None) -> int:
-    """Write the tracker's state to `path` atomically; the number of bytes written."""
+def write_checkpoint(path: str | Path, tracker: Tracker, *, namespace: str = "", now_wall_ns: int | None = None) -> int:
+    """Write the tracker's state (and the namespace of the service it tracks for) to `path`
+    atomically; the number of bytes written."""
     p = Path(path)
     p.parent.mkdir(parents=True, exist_ok=True)
-    data = MAGIC + _enc.encode(CheckpointFile(written_wall_ns=now_wall_ns or time.time_ns(), state=tracker.state()))
+    data = MAGIC + _enc.encode(CheckpointFile(written_wall_ns=now_wall_ns or time.time_ns(), state=tracker.state(),
+                                              namespace=namespace))
     tmp = _temp_path(p, os.getpid())
     with open(tmp, "wb") as f:
         f.write(data)
@@ -85,9 +88,12 @@ class Resumed:
     tracks: int
 
 
-def read_checkpoint(path: str | Path, config: TrackerConfig, *, now_wall_ns: int | None = None,
+def read_checkpoint(path: str | Path, config: TrackerConfig, *, namespace: str = "", now_wall_ns: int | None = None,
                     into: Tracker | None = None) -> Resumed | None:
-    """The tracker a checkpoint holds; None when there is none; CheckpointError when unusable.
+    """The tracker a checkpoint holds; None when there is none; CheckpointError when unusable:
+    also when it was written by a service on another `namespace` (its tracks are of other
+    targets: resumed, they showed as confirmed tracks of this one). A checkpoint without a
+    namespace (before it was written, or not a service's) is taken by any.
     `into`: a freshly built tracker of `config` to restore in place (others may hold it), once the
     checkpoint has restored cleanly into a scratch one; it is left untouched when it cannot."""
     p = Path(path)
@@ -103,6 +109,9 @@ def read_checkpoint(path: str | Path, config: TrackerConfig, *, now_wall_ns: int
         cf = _dec.decode(data[len(MAGIC):])
     except msgspec.DecodeError as e:
         raise CheckpointError(f"{p}: damaged or of another version: {e}") from None
+    if namespace and cf.namespace and cf.namespace != namespace:
+        raise CheckpointError(f"{p}: written by the service on namespace {cf.namespace!r}, not {namespace!r} "
+                              "(a service per namespace needs a [checkpoint] path or [recording] directory of its own)")
     try:
         tracker = Tracker.resume(config, cf.state)
     except (ConfigError, ValueError) as e:

@@ -2,8 +2,9 @@
 
 `resume(config)` reads the checkpoint (fusion.io.checkpoint): the tracker it holds, with how old
 it is; none there: a clean start. A checkpoint that cannot be used (not a checkpoint, cut
-short, another configuration) is moved aside to `<name>.bad-<wall ns>` with a warning that says
-why, and the service starts clean: it never crashes on one, and the bad file stays for a look.
+short, another configuration, written by the service of another namespace) is moved aside to
+`<name>.bad-<wall ns>` with a warning that says why, and the service starts clean: it never
+crashes on one, and the bad file stays for a look.
 `maybe_write(tracker)` writes when `interval_s` has passed since the last write, `write` at
 once (at shutdown). A write that fails (disk full, folder unwritable) is logged once per
 distinct error and reported in `status()`; tracking goes on.
@@ -33,8 +34,10 @@ log = logging.getLogger("fusion.checkpoint")
 class Checkpointer:
     """Checkpoints of one service at `path` (see the module docstring)."""
 
-    def __init__(self, path: str | Path, *, interval_s: float, clock: Callable[[], float] = time.monotonic) -> None:
+    def __init__(self, path: str | Path, *, interval_s: float, namespace: str = "",
+                 clock: Callable[[], float] = time.monotonic) -> None:
         self.path = Path(path)
+        self.namespace = namespace  # written into each checkpoint; one of another namespace is refused
         self.interval_s = interval_s
         self._clock = clock
         self._last: float | None = None
@@ -55,7 +58,7 @@ class Checkpointer:
         except OSError as e:
             log.warning("cannot remove the temporary files of %s: %s", self.path, e.strerror or e)
         try:
-            r = read_checkpoint(self.path, tracker.config, into=tracker)
+            r = read_checkpoint(self.path, tracker.config, namespace=self.namespace, into=tracker)
         except CheckpointError as e:
             aside = self.path.with_name(f"{self.path.name}.bad-{time.time_ns()}")
             try:
@@ -84,7 +87,7 @@ class Checkpointer:
     def write(self, tracker: Tracker) -> None:
         self._last = self._clock()
         try:
-            write_checkpoint(self.path, tracker)
+            write_checkpoint(self.path, tracker, namespace=self.namespace)
         except OSError as e:
             msg = f"cannot write the checkpoint {self.path}: {e.strerror or e}"
             if msg != self.error:

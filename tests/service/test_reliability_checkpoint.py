@@ -113,7 +113,7 @@ def test_checkpoints_are_written_on_the_interval(tmp_path: Path) -> None:
     assert st.checkpoint is not None and st.checkpoint.written >= 2 and st.checkpoint.last_written_age_s < 1.0
 
 
-@pytest.mark.parametrize("kind", ["garbage", "cut", "foreign"], ids=str)
+@pytest.mark.parametrize("kind", ["garbage", "cut", "foreign", "namespace"], ids=str)
 def test_a_bad_checkpoint_is_moved_aside_and_the_service_starts_clean(kind: str, tmp_path: Path,
                                                                       caplog: pytest.LogCaptureFixture) -> None:
     spec, cfg = scenario_config("radar2d")
@@ -124,20 +124,27 @@ def test_a_bad_checkpoint_is_moved_aside_and_the_service_starts_clean(kind: str,
     if kind == "garbage":
         cp.write_bytes(b"\x00not a checkpoint" * 10)
     else:
-        other = cfg if kind == "cut" else msgspec.structs.replace(scenario_config("mix")[1], checkpoint=cfg.checkpoint)
+        other = {"cut": cfg, "foreign": msgspec.structs.replace(scenario_config("mix")[1], checkpoint=cfg.checkpoint),
+                 "namespace": msgspec.structs.replace(cfg, namespace=cfg.namespace + "-other")}[kind]
+        sent = {"cut": samples[:100], "foreign": [],
+                "namespace": build_stream(spec, namespace=other.namespace)[0][:100]}
         with service_in(other, tmp_path) as (svc, endpoint):
             s = client(endpoint)
             try:
-                publish(s, [x for x in samples[:100]] if kind == "cut" else [], speed=0.0, match_timeout_s=5.0)
+                publish(s, sent[kind], speed=0.0, match_timeout_s=5.0)
                 assert svc.wait_idle(timeout_s=30.0)
             finally:
                 s.close()
         if kind == "cut":
             cp.write_bytes(cp.read_bytes()[:-40])
+        if kind == "namespace":  # the other namespace's service had tracks to resume
+            assert read_checkpoint(cp, other.tracker, namespace=other.namespace).tracks > 0  # type: ignore[union-attr]
     with caplog.at_level(logging.WARNING, logger="fusion.checkpoint"), service_in(cfg, tmp_path) as (svc, endpoint):
         st = _status(endpoint, cfg.namespace)
     assert st.checkpoint is not None and st.checkpoint.resumed_tracks == 0 and st.checkpoint.refused
     assert st.tracks == {}
+    if kind == "namespace":
+        assert f"written by the service on namespace {cfg.namespace + '-other'!r}" in st.checkpoint.refused
     aside = list(cp.parent.glob(f"{cp.name}.bad-*"))
     assert len(aside) == 1
     msg = " ".join(r.getMessage() for r in caplog.records)

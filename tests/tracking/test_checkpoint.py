@@ -102,6 +102,22 @@ def test_a_checkpoint_of_another_configuration_is_refused(tmp_path: Path) -> Non
     assert read_checkpoint(tmp_path / "missing.ck", _config(MOTIONS["cv"])) is None
 
 
+def test_a_checkpoint_of_another_namespace_is_refused(tmp_path: Path) -> None:
+    """Its tracks are of other targets: a service on another namespace (same configuration,
+    same folder) resumed them as its own confirmed tracks."""
+    cfg = _config(MOTIONS["cv"])
+    tr = Tracker(cfg)
+    for b in _batches()[:6]:
+        tr.process(b)
+    write_checkpoint(tmp_path / "t.ck", tr, namespace="demo")
+    with pytest.raises(CheckpointError, match="written by the service on namespace 'demo', not 'other'"):
+        read_checkpoint(tmp_path / "t.ck", cfg, namespace="other")
+    assert read_checkpoint(tmp_path / "t.ck", cfg, namespace="demo").tracks == len(tr.tracks)  # type: ignore[union-attr]
+    assert read_checkpoint(tmp_path / "t.ck", cfg).tracks == len(tr.tracks)  # type: ignore[union-attr]  # not a service
+    write_checkpoint(tmp_path / "old.ck", tr)  # as written before checkpoints said their namespace
+    assert read_checkpoint(tmp_path / "old.ck", cfg, namespace="other").tracks == len(tr.tracks)  # type: ignore[union-attr]
+
+
 def test_writing_replaces_the_old_checkpoint_whole(tmp_path: Path) -> None:
     cfg = _config(MOTIONS["cv"])
     tr = Tracker(cfg)
