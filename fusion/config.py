@@ -278,13 +278,17 @@ class AccessControlConfig(Section):
     names, so [zenoh.tls] with require_client_certificate is needed; anyone else may do nothing.
 
     sensors:    sensor id -> the names that may put fusion/NS/meas/<that id> (and nothing else)
-    simulators: may put any fusion/NS/meas/* and fusion/NS/truth/* (fusion-publish)
+    inputs:     control source id -> the names that may put fusion/NS/input/<that id> (and
+                nothing else)
+    simulators: may put any fusion/NS/meas/*, fusion/NS/input/* and fusion/NS/truth/*
+                (fusion-publish)
     consumers:  may subscribe fusion/NS/tracks/* and query fusion/NS/status and /snapshot
-    recorders:  may subscribe fusion/NS/meas/* and fusion/NS/truth/* (fusion record)
+    recorders:  may subscribe fusion/NS/meas/*, input/* and truth/* (fusion record)
     services:   may put tracks and answer status/snapshot; needed only where the rules run on a
                 router the service connects to (the service's own peer never filters itself)"""
 
     sensors: dict[Ident, list[CommonName]] = {}
+    inputs: dict[Ident, list[CommonName]] = {}
     simulators: list[CommonName] = []
     consumers: list[CommonName] = []
     recorders: list[CommonName] = []

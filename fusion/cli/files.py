@@ -20,7 +20,7 @@ REPLAY_DESCRIPTION = """\
 Feed a recorded input stream through the same pipeline as the live service, and write a new
 recording. Deterministic: the estimates are those the live service published. Streams come
 from `fusion demo` and `fusion serve` (a .fstream beside each .rrd), from `fusion record`, or
-are a .jsonl file of measurement messages."""
+are a .jsonl file of measurement, control input and truth messages."""
 
 REPLAY_EXAMPLES = """\
 examples:

@@ -151,10 +151,13 @@ def read_jsonl(path: str | Path, *, namespace: str) -> Iterator[Record]:
                 raise InputError(f"{path}:{i}: {e}") from None
             if isinstance(msg, m.Measurement):
                 yield msg.t_ns, m.meas_key(namespace, msg.sensor_id), m.encode(msg)
+            elif isinstance(msg, m.Input):
+                yield msg.t_ns, m.input_key(namespace, msg.source_id), m.encode(msg)
             elif isinstance(msg, m.Truth):
                 yield msg.t_ns, m.truth_key(namespace, msg.target_id), m.encode(msg)
             else:
-                raise InputError(f"{path}:{i}: a stream holds measurements and truth, not {type(msg).__name__}")
+                raise InputError(f"{path}:{i}: a stream holds measurements, control inputs and truth, "
+                                 f"not {type(msg).__name__}")
 
 
 def read_records(path: str | Path, *, namespace: str = "demo") -> tuple[Iterator[Record], dict[str, Any]]:

@@ -17,20 +17,26 @@ With NS the namespace, what each role may do (everything else is dropped):
                 (those also on fusion/NS/meas/*/@adv/*/**), their replies in) and to see the
                 service's subscriber token
                 (fusion/NS/meas/*/@adv/sub/**: the token out, the liveliness query for it in)
-  simulator     put fusion/NS/meas/* and fusion/NS/truth/*; see subscriptions on them; the
-                advanced publisher's exchanges as for a sensor, on fusion/NS/meas/*
+  input X       the same for a control source, on fusion/NS/input/X (subscribed: input/*)
+  simulator     put fusion/NS/meas/*, fusion/NS/input/* and fusion/NS/truth/*; see
+                subscriptions on them; the advanced publisher's exchanges as for a sensor, on
+                fusion/NS/meas/* and fusion/NS/input/*
   consumer      subscribe fusion/NS/tracks/* and receive its puts; query fusion/NS/status and
                 fusion/NS/snapshot and receive the replies
-  recorder      subscribe fusion/NS/meas/* and fusion/NS/truth/* and receive their puts
+  recorder      subscribe fusion/NS/meas/*, input/* and truth/* and receive their puts; what
+                zenoh's advanced subscriber needs on meas/* and input/* (its token in, the
+                publishers' tokens and heartbeats out, its history and recovery queries in
+                and their replies out): it recovers a dropped sample as the service does
   service       put fusion/NS/tracks/* and see the subscriptions on it (its declared publishers
                 only send to subscribers they know of); declare the status and snapshot
-                queryables, receive the queries on them and reply; subscribe measurements and
-                truth and receive their puts (for rules on a router the service connects to)
+                queryables, receive the queries on them and reply; subscribe measurements,
+                inputs and truth and receive their puts, with the advanced subscriber's
+                exchanges as a recorder's (for rules on a router the service connects to)
 
 Hence a sensor cannot forge estimates (its put on tracks is dropped at ingress), cannot answer
 for the service (its status or snapshot queryable is never declared to the node, so no query
-reaches it), cannot read the snapshot, and cannot speak for another sensor; a consumer cannot
-publish measurements.
+reaches it), cannot read the snapshot, and cannot speak for another sensor (nor a control source for
+another source); a consumer cannot publish measurements or inputs.
 """
 
 from __future__ import annotations
@@ -40,35 +46,37 @@ from typing import Any
 from fusion.config import AccessControlConfig
 
 PUT, SUB, QUERY, REPLY, QUERYABLE = "put", "declare_subscriber", "query", "reply", "declare_queryable"
-TOKEN, LIVE_QUERY = "liveliness_token", "liveliness_query"
+TOKEN, LIVE_QUERY, LIVE_SUB = "liveliness_token", "liveliness_query", "declare_liveliness_subscriber"
 IN, OUT = "ingress", "egress"
 
 
 def _keys(ns: str) -> dict[str, str]:
     root = f"fusion/{ns}"
-    return {"meas": f"{root}/meas/*", "truth": f"{root}/truth/*", "tracks": f"{root}/tracks/*",
-            "status": f"{root}/status", "snapshot": f"{root}/snapshot"}
+    return {"meas": f"{root}/meas/*", "input": f"{root}/input/*", "truth": f"{root}/truth/*",
+            "tracks": f"{root}/tracks/*", "status": f"{root}/status", "snapshot": f"{root}/snapshot"}
 
 
 def role_grants(role: str, ns: str, *, sensor_id: str = "") -> list[tuple[str, str, list[str]]]:
-    """What `role` may do: (message, flow, key expressions) triples, all "allow"."""
+    """What `role` may do: (message, flow, key expressions) triples, all "allow". `sensor_id`:
+    the sensor's id for "sensor", the control source's for "input"."""
     k = _keys(ns)
     queries = [k["status"], k["snapshot"]]
-    if role == "sensor":
-        return [(PUT, IN, [f"fusion/{ns}/meas/{sensor_id}"]), (SUB, OUT, [k["meas"]]),
-                *_recoverable_publisher([f"fusion/{ns}/meas/{sensor_id}"], k["meas"])]
+    samples = [k["meas"], k["input"], k["truth"]]  # what the service takes in
+    if role in ("sensor", "input"):
+        kind = "meas" if role == "sensor" else "input"
+        own = [f"fusion/{ns}/{kind}/{sensor_id}"]
+        return [(PUT, IN, own), (SUB, OUT, [k[kind]]), *_recoverable_publisher(own, k[kind])]
     if role == "simulator":
-        return [(PUT, IN, [k["meas"], k["truth"]]), (SUB, OUT, [k["meas"], k["truth"]]),
-                *_recoverable_publisher([k["meas"]], k["meas"])]
+        return [(PUT, IN, samples), (SUB, OUT, samples),
+                *_recoverable_publisher([k["meas"]], k["meas"]), *_recoverable_publisher([k["input"]], k["input"])]
     if role == "consumer":
         return [(SUB, IN, [k["tracks"]]), (PUT, OUT, [k["tracks"]]), (QUERY, IN, queries), (REPLY, OUT, queries)]
     if role == "recorder":
-        return [(SUB, IN, [k["meas"], k["truth"]]), (PUT, OUT, [k["meas"], k["truth"]])]
+        return [(SUB, IN, samples), (PUT, OUT, samples), *_recovering_subscriber([k["meas"], k["input"]])]
     if role == "service":
         return [(PUT, IN, [k["tracks"]]), (SUB, OUT, [k["tracks"]]), (QUERYABLE, IN, queries),
-                (REPLY, IN, queries),
-                (SUB, IN, [k["meas"], k["truth"]]), (PUT, OUT, [k["meas"], k["truth"]]),
-                (QUERY, OUT, queries)]
+                (REPLY, IN, queries), (SUB, IN, samples), (PUT, OUT, samples), (QUERY, OUT, queries),
+                *_recovering_subscriber([k["meas"], k["input"]])]
     raise ValueError(f"unknown role {role!r}")
 
 
@@ -88,12 +96,28 @@ def _recoverable_publisher(own: list[str], subscribed: str) -> list[tuple[str, s
             (TOKEN, OUT, adv_sub), (LIVE_QUERY, IN, [f"{key}/@adv/sub/**" for key in own])]
 
 
+def _recovering_subscriber(subscribed: list[str]) -> list[tuple[str, str, list[str]]]:
+    """What zenoh's advanced subscriber on each key of `subscribed` (fusion.io.zenoh_advanced's
+    RecoveringSubscription) exchanges with the publishers' side of _recoverable_publisher: its
+    own liveliness token (`<key>/@adv/sub/**`) in; its liveliness subscriber on the publishers'
+    tokens (`<key>/@adv/pub/**`, with the liveliness query for those already there) in and the
+    tokens out; its subscription to their heartbeats in and the heartbeats out; its history and
+    recovery queries (`<key>/@adv/*/**`) in and their replies, on the samples' keys, out."""
+    adv_pub = [f"{key}/@adv/pub/**" for key in subscribed]
+    adv = [f"{key}/@adv/*/**" for key in subscribed]
+    return [(TOKEN, IN, [f"{key}/@adv/sub/**" for key in subscribed]), (LIVE_SUB, IN, adv_pub),
+            (LIVE_QUERY, IN, adv_pub), (TOKEN, OUT, adv_pub), (SUB, IN, adv_pub), (PUT, OUT, adv_pub),
+            (QUERY, IN, [*adv_pub, *adv]), (REPLY, OUT, [*subscribed, *adv_pub])]
+
+
 def access_control_section(ac: AccessControlConfig, *, namespace: str) -> dict[str, Any]:
     """Zenoh's `access_control` configuration section (a JSON-able dict) for `ac` on `namespace`:
-    default deny; one subject, one policy and its rules per role (per sensor for sensors);
+    default deny; one subject, one policy and its rules per role (per sensor for sensors, per
+    source for control sources);
     roles with no names are left out."""
-    groups: list[tuple[str, str, str, list[str]]] = [  # (id, role, sensor id, common names)
-        (f"sensor-{sid}", "sensor", sid, names) for sid, names in sorted(ac.sensors.items())
+    groups: list[tuple[str, str, str, list[str]]] = [  # (id, role, sensor or source id, common names)
+        *((f"sensor-{sid}", "sensor", sid, names) for sid, names in sorted(ac.sensors.items())),
+        *((f"input-{sid}", "input", sid, names) for sid, names in sorted(ac.inputs.items())),
     ]
     groups += [(role, role, "", names) for role, names in (
         ("simulator", ac.simulators), ("consumer", ac.consumers), ("recorder", ac.recorders),

@@ -154,6 +154,24 @@ def test_jsonl(tmp_path: Path) -> None:
         list(read_records(bad, namespace="t")[0])
 
 
+def test_jsonl_with_control_inputs_and_truth(tmp_path: Path) -> None:
+    """A .jsonl of cv1d_d's messages (measurements, control inputs, truth) reads as the stream
+    fusion-publish sends (inputs were refused before); an estimate in it is refused by line."""
+    sf = load_scenario_file(scenario_path("cv1d_d"))
+    samples, _ = build_stream(sf.scenario, namespace="t")
+    assert {s.key.split("/")[2] for s in samples} == {"meas", "input", "truth"}
+    p = tmp_path / "cv1d_d.jsonl"
+    p.write_bytes(b"".join(m.encode_json(m.decode_any(s.payload)) + b"\n" for s in samples))
+    got, _ = read_records(p, namespace="t")
+    assert [(k, m.decode_any(pl)) for _, k, pl in got] == [(s.key, m.decode_any(s.payload)) for s in samples]
+    est = m.Estimate(track_id=1, t_ns=0, sensor_id="s", seq=0, state=[0.0], cov=[1.0], layout=["x"], model="cv",
+                     status="confirmed", revision=0)
+    bad = tmp_path / "est.jsonl"
+    bad.write_bytes(m.encode_json(est) + b"\n")
+    with pytest.raises(m.InputError, match=r"est\.jsonl:1: a stream holds measurements, control inputs and truth"):
+        list(read_records(bad, namespace="t")[0])
+
+
 @pytest.mark.parametrize("name", ["radar2d", "cv1d_d"])  # cv1d_d has control inputs
 def test_recorder_over_zenoh(name: str, tmp_path: Path, zenoh_hub: tuple, zenoh_client: Any,
                              caplog: pytest.LogCaptureFixture) -> None:

@@ -14,14 +14,15 @@ from typing import Any
 import msgspec
 import pytest
 
+from fusion import messages as m
 from fusion.config import AccessControlConfig, ServiceConfig, TlsConfig, ZenohConfig
-from fusion.io.zenoh_bus import free_tcp_port, zenoh_session_config
+from fusion.io.zenoh_bus import free_tcp_port, zenoh_json, zenoh_session_config
 from fusion.service import Service
 
 MAKE_CERTS = Path(__file__).resolve().parents[2] / "configs" / "security" / "make-certs.sh"
 # CN of every client certificate made for the tests; "stranger" is signed by the CA but named in
 # no access-control role.
-CLIENTS = ("sensor-cam1", "sensor-radar1", "simulator", "viewer", "recorder", "stranger")
+CLIENTS = ("sensor-cam1", "sensor-radar1", "input-control", "simulator", "viewer", "recorder", "stranger")
 
 
 class Certs:
@@ -114,3 +115,25 @@ def tls_client() -> Iterator[Callable[..., Any]]:
     finally:
         for s in reversed(opened):
             s.close()
+
+
+def cam1_measurement(seq: int, *, big: bool = False) -> bytes:
+    """cam1's measurement `seq` (every 0.2 s); `big` (a covariance given) makes it larger than
+    any of the others, so a size filter (lossy_client) drops it."""
+    return m.encode(m.Measurement(sensor_id="cam1", t_ns=seq * 200_000_000, seq=seq, data=m.Cartesian(
+        pos_m=[100.0 + seq, 0.0], cov_m2=[1.0, 0.0, 0.0, 1.0] if big else None)))
+
+
+def lossy_client(certs: Certs, endpoint: str, name: str, ns: str) -> Any:
+    """A client session with `name`'s certificate that drops, as they leave it, its puts on
+    fusion/<ns>/meas/** larger than cam1_measurement(seq) for seq < 10 (zenoh's low-pass filter):
+    the network losing chosen samples. The caller closes it."""
+    import json
+
+    import zenoh
+
+    conf = zenoh_json(ZenohConfig(mode="client", listen=[], connect=[endpoint], tls=certs.tls(name)))
+    small = max(len(cam1_measurement(s)) for s in range(10))
+    conf["low_pass_filter"] = [{"flows": ["egress"], "messages": ["put"], "key_exprs": [f"fusion/{ns}/meas/**"],
+                                "size_limit": small}]
+    return zenoh.open(zenoh.Config.from_json5(json.dumps(conf)))

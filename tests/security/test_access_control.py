@@ -8,6 +8,7 @@ there the forgeries get through (what the hostile-client probe of issue 13 found
 from __future__ import annotations
 
 import json
+import logging
 import threading
 import time
 from collections.abc import Callable
@@ -22,7 +23,7 @@ from fusion.config import AccessControlConfig, ZenohConfig
 from fusion.io.zenoh_bus import free_tcp_port, wait_for_match, zenoh_json
 from publishers.publish import publish
 from publishers.stream import build_stream
-from tests.security.conftest import Certs, service_zenoh, tls_service
+from tests.security.conftest import Certs, cam1_measurement, lossy_client, service_zenoh, tls_service
 from tests.service.harness import scenario_config
 
 ACL = AccessControlConfig(sensors={"cam1": ["sensor-cam1"], "radar1": ["sensor-radar1"]}, simulators=["simulator"],
@@ -183,10 +184,13 @@ def test_ingress_filter_holds_when_the_sensor_sees_every_subscription(certs: Cer
 
 
 def test_profile_on_a_router_with_the_service_as_a_client(certs: Certs, tmp_path: Path,
-                                                          tls_client: Callable[..., Any]) -> None:
+                                                          tls_client: Callable[..., Any],
+                                                          caplog: pytest.LogCaptureFixture) -> None:
     """The same rules on a zenoh router (here an in-process Python one) that the service joins as
     a client with the `services` identity: the service gets measurements and publishes tracks,
-    a sensor still can neither forge estimates nor answer status queries."""
+    a sensor still can neither forge estimates nor answer status queries. The service's advanced
+    subscriber is announced through the router (its liveliness token is granted), so the
+    simulator's publishers see it at once instead of waiting out their match timeout."""
     import zenoh
 
     from fusion.service import Service
@@ -211,7 +215,8 @@ def test_profile_on_a_router_with_the_service_as_a_client(certs: Certs, tmp_path
             rogue = cam.declare_queryable(m.status_key(ns), lambda q: q.reply(q.key_expr, b"forged"))
             time.sleep(PROPAGATION_S)
             cam.put(m.track_key(ns, 999), b"forged")
-            publish(tls_client(endpoint, certs.tls("simulator")), samples, speed=0.0, match_timeout_s=5.0)
+            with caplog.at_level(logging.WARNING, logger="publishers"):
+                publish(tls_client(endpoint, certs.tls("simulator")), samples, speed=0.0, match_timeout_s=5.0)
             assert svc.wait_idle(timeout_s=60.0)
             deadline = time.monotonic() + 5.0
             while len(tracks.key_list()) < svc.published and time.monotonic() < deadline:
@@ -227,6 +232,7 @@ def test_profile_on_a_router_with_the_service_as_a_client(certs: Certs, tmp_path
     assert svc.published > 0 and len(tracks.key_list()) == svc.published
     assert m.track_key(ns, 999) not in tracks.key_list()
     assert len(status) == 1 and m.decode_status(status[0]).counts.received == received
+    assert not [r for r in caplog.records if "no subscriber matched" in r.message]
 
 
 def test_a_sensors_dropped_measurements_are_recovered_under_access_control(certs: Certs, tmp_path: Path) -> None:
@@ -234,23 +240,13 @@ def test_a_sensors_dropped_measurements_are_recovered_under_access_control(certs
     they leave it (a low-pass filter on its session); the service recovers all three from its
     cache (a hole, then the heartbeat for the last one), and cam1 still may not publish for
     radar1 nor query the status."""
-    import zenoh
-
     from fusion.io.zenoh_advanced import declare_recoverable_publisher, wait_for_recovering_subscriber
 
     cfg, _ = _mix(1.0)
     ns = cfg.namespace
-
-    def cam1(seq: int, *, big: bool = False) -> bytes:
-        return m.encode(m.Measurement(sensor_id="cam1", t_ns=seq * 200_000_000, seq=seq, data=m.Cartesian(
-            pos_m=[100.0 + seq, 0.0], cov_m2=[1.0, 0.0, 0.0, 1.0] if big else None)))
-
-    small = max(len(cam1(s)) for s in range(10))
+    cam1 = cam1_measurement
     with tls_service(cfg, certs, tmp_path, access_control=ACL) as (svc, endpoint):
-        conf = zenoh_json(ZenohConfig(mode="client", listen=[], connect=[endpoint], tls=certs.tls("sensor-cam1")))
-        conf["low_pass_filter"] = [{"flows": ["egress"], "messages": ["put"], "key_exprs": [f"fusion/{ns}/meas/**"],
-                                    "size_limit": small}]
-        cam = zenoh.open(zenoh.Config.from_json5(json.dumps(conf)))
+        cam = lossy_client(certs, endpoint, "sensor-cam1", ns)
         try:
             pub = declare_recoverable_publisher(cam, m.meas_key(ns, "cam1"), cache_samples=100, heartbeat_s=0.1)
             assert wait_for_recovering_subscriber(cam, m.meas_key(ns, "cam1"), timeout_s=5.0)

@@ -137,29 +137,48 @@ def _grants(ac: AccessControlConfig) -> set[tuple[str, str, str, str]]:
 def test_access_control_profile() -> None:
     """What each identity may send to the service's peer (ingress) and receive from it (egress)."""
     ac = AccessControlConfig(sensors={"cam1": ["s-cam1"], "radar1": ["s-radar1", "s-radar1-spare"]},
-                             simulators=["sim"], consumers=["view"], recorders=["rec"], services=["svc"])
+                             inputs={"wheel": ["i-wheel"]}, simulators=["sim"], consumers=["view"], recorders=["rec"],
+                             services=["svc"])
     g = _grants(ac)
     ingress = {(cn, msg, k) for cn, msg, flow, k in g if flow == "ingress"}
-    adv = {"s-cam1": "fusion/ns/meas/cam1", "s-radar1": "fusion/ns/meas/radar1",
-           "s-radar1-spare": "fusion/ns/meas/radar1", "sim": "fusion/ns/meas/*"}  # advanced publishers' keys
+    egress = {(cn, msg, k) for cn, msg, flow, k in g if flow == "egress"}
+    adv = {"s-cam1": ["fusion/ns/meas/cam1"], "s-radar1": ["fusion/ns/meas/radar1"],
+           "s-radar1-spare": ["fusion/ns/meas/radar1"], "i-wheel": ["fusion/ns/input/wheel"],
+           "sim": ["fusion/ns/meas/*", "fusion/ns/input/*"]}  # advanced publishers' keys
+    subscribed = ["fusion/ns/meas/*", "fusion/ns/input/*"]  # the advanced subscribers' keys (rec, svc)
+    samples = [*subscribed, "fusion/ns/truth/*"]
     assert {x for x in ingress if x[1] == "put"} == {
         ("s-cam1", "put", "fusion/ns/meas/cam1"), ("s-radar1", "put", "fusion/ns/meas/radar1"),
-        ("s-radar1-spare", "put", "fusion/ns/meas/radar1"), ("sim", "put", "fusion/ns/meas/*"),
-        ("sim", "put", "fusion/ns/truth/*"), ("svc", "put", "fusion/ns/tracks/*"),
-        *((cn, "put", f"{k}/@adv/pub/**") for cn, k in adv.items())}  # heartbeats
+        ("s-radar1-spare", "put", "fusion/ns/meas/radar1"), ("i-wheel", "put", "fusion/ns/input/wheel"),
+        *(("sim", "put", k) for k in samples), ("svc", "put", "fusion/ns/tracks/*"),
+        *((cn, "put", f"{k}/@adv/pub/**") for cn, ks in adv.items() for k in ks)}  # heartbeats
     assert {x for x in ingress if x[1] in ("declare_queryable", "reply")} == {
         *(("svc", m, k) for m in ("declare_queryable", "reply") for k in ("fusion/ns/status", "fusion/ns/snapshot")),
-        *((cn, "declare_queryable", f"{k}/@adv/pub/**") for cn, k in adv.items()),  # their caches
-        *((cn, "reply", r) for cn, k in adv.items() for r in (k, f"{k}/@adv/pub/**"))}
+        *((cn, "declare_queryable", f"{k}/@adv/pub/**") for cn, ks in adv.items() for k in ks),  # their caches
+        *((cn, "reply", r) for cn, ks in adv.items() for k in ks for r in (k, f"{k}/@adv/pub/**"))}
     assert {x for x in ingress if x[1] == "query"} == {
-        ("view", "query", "fusion/ns/status"), ("view", "query", "fusion/ns/snapshot")}
+        ("view", "query", "fusion/ns/status"), ("view", "query", "fusion/ns/snapshot"),
+        # the advanced subscribers' history and recovery queries
+        *((cn, "query", q) for cn in ("rec", "svc") for k in subscribed
+          for q in (f"{k}/@adv/pub/**", f"{k}/@adv/*/**"))}
     assert {x for x in ingress if x[1] == "declare_subscriber"} == {
-        ("view", "declare_subscriber", "fusion/ns/tracks/*"), ("rec", "declare_subscriber", "fusion/ns/meas/*"),
-        ("rec", "declare_subscriber", "fusion/ns/truth/*"), ("svc", "declare_subscriber", "fusion/ns/meas/*"),
-        ("svc", "declare_subscriber", "fusion/ns/truth/*")}
-    egress_put = {(cn, k) for cn, msg, flow, k in g if flow == "egress" and msg == "put"}
-    assert egress_put == {("view", "fusion/ns/tracks/*"), ("rec", "fusion/ns/meas/*"), ("rec", "fusion/ns/truth/*"),
-                          ("svc", "fusion/ns/meas/*"), ("svc", "fusion/ns/truth/*")}
+        ("view", "declare_subscriber", "fusion/ns/tracks/*"),
+        *((cn, "declare_subscriber", k) for cn in ("rec", "svc") for k in samples),
+        *((cn, "declare_subscriber", f"{k}/@adv/pub/**") for cn in ("rec", "svc") for k in subscribed)}  # heartbeats
+    assert {x for x in ingress if x[1].startswith("liveliness") or x[1] == "declare_liveliness_subscriber"} == {
+        *((cn, "liveliness_token", f"{k}/@adv/pub/**") for cn, ks in adv.items() for k in ks),
+        *((cn, "liveliness_query", f"{k}/@adv/sub/**") for cn, ks in adv.items() for k in ks),
+        *((cn, m, f"{k}/@adv/pub/**") for cn in ("rec", "svc") for k in subscribed
+          for m in ("declare_liveliness_subscriber", "liveliness_query")),
+        *((cn, "liveliness_token", f"{k}/@adv/sub/**") for cn in ("rec", "svc") for k in subscribed)}
+    assert {(cn, k) for cn, msg, k in egress if msg == "put"} == {
+        ("view", "fusion/ns/tracks/*"), *((cn, k) for cn in ("rec", "svc") for k in samples),
+        *((cn, f"{k}/@adv/pub/**") for cn in ("rec", "svc") for k in subscribed)}  # heartbeats
+    # a control source's identity is a sensor's on its own key: nothing on measurements, truth or tracks
+    assert {k for cn, _, _, k in g if cn == "i-wheel"} == {
+        "fusion/ns/input/wheel", "fusion/ns/input/*", "fusion/ns/input/wheel/@adv/pub/**",
+        "fusion/ns/input/*/@adv/*/**", "fusion/ns/input/*/@adv/pub/**", "fusion/ns/input/*/@adv/sub/**",
+        "fusion/ns/input/wheel/@adv/sub/**"}
     assert access_control_section(AccessControlConfig(), namespace="ns") == {
         "enabled": True, "default_permission": "deny", "rules": [], "subjects": [], "policies": []}
 
@@ -167,13 +186,14 @@ def test_access_control_profile() -> None:
 @pytest.mark.parametrize("section, match", [
     ('[zenoh.access_control.sensors]\n"cam1\\n" = ["s"]', r"zenoh\.access_control\.sensors: a key: Expected str"),
     ('[zenoh.access_control.sensors]\n"a/b" = ["s"]', r"zenoh\.access_control\.sensors: a key: Expected str"),
+    ('[zenoh.access_control.inputs]\n"*" = ["s"]', r"zenoh\.access_control\.inputs: a key: Expected str"),
     ('[zenoh.access_control]\nconsumers = [""]', r"zenoh\.access_control\.consumers\[0\]"),
     ('[zenoh.access_control]\nconsumers = [" viewer"]', r"zenoh\.access_control\.consumers\[0\]"),
     ('[zenoh.access_control]\nenabled = true', "unknown key 'enabled'"),
     ('[zenoh.tls]\nroot_ca = "ca.pem"\nverify = false', "unknown key 'verify'"),
     ('[zenoh.tls]\ncertificate = "c.pem"', "required key 'root_ca' is missing"),
-], ids=["newline in sensor id", "slash in sensor id", "empty name", "blank around name", "enabled",
-        "unknown tls field", "tls without root_ca"])
+], ids=["newline in sensor id", "slash in sensor id", "wildcard in source id", "empty name", "blank around name",
+        "enabled", "unknown tls field", "tls without root_ca"])
 def test_config_sections_refuse_mistakes(section: str, match: str) -> None:
     svc = (ROOT / "configs" / "service.toml").read_text()
     with pytest.raises(ConfigError, match=match):
