@@ -44,17 +44,18 @@ class ReplayCounts:
     smoothing_failed: tuple[tuple[int, str], ...] = ()  # (track id, why)
     rmse_filtered_m: float | None = None  # position RMSE vs truth, over the smoothed tracks' matched rows
     rmse_smoothed_m: float | None = None
+    config: Path | None = None  # the configuration the stream was replayed with
 
 
-def _config_for(path: Path | None, namespace: str) -> ServiceConfig:
-    """A service config: the file given (service or scenario TOML), or the scenario whose
-    namespace the stream was recorded under."""
+def _config_for(path: Path | None, namespace: str) -> tuple[ServiceConfig, Path]:
+    """A service config and its file: the file given (service or scenario TOML), or the
+    scenario whose namespace the stream was recorded under."""
     if path is not None:
-        return load_service_config(path)
+        return load_service_config(path), path
     for p in sorted((CONFIGS / "scenarios").glob("*.toml")):
         cfg = load_service_config(p)
         if cfg.namespace == namespace:
-            return cfg
+            return cfg, p
     raise ConfigError(f"no configuration for namespace {namespace!r}: pass --config")
 
 
@@ -68,7 +69,7 @@ def replay(stream: str | Path, *, config: str | Path | None = None, out: str | P
     are closed complete even when interrupted (KeyboardInterrupt propagates)."""
     records, meta = read_records(stream)
     ns = str(meta.get("namespace", "demo"))
-    cfg = _config_for(Path(config) if config else None, ns)
+    cfg, cfg_path = _config_for(Path(config) if config else None, ns)
     tracker = Tracker(cfg.tracker)
     sink = None
     if out is not None:
@@ -121,6 +122,6 @@ def replay(stream: str | Path, *, config: str | Path | None = None, out: str | P
         if sink is not None:
             sink.close()
     if sm is None:
-        return ReplayCounts(len(all_records), n_est, pipe.counts())
+        return ReplayCounts(len(all_records), n_est, pipe.counts(), config=cfg_path)
     rf, rs = position_rmse(sm.tracks, tracker.position_indices)
-    return ReplayCounts(len(all_records), n_est, pipe.counts(), len(sm.tracks), sm.failed, rf, rs)
+    return ReplayCounts(len(all_records), n_est, pipe.counts(), len(sm.tracks), sm.failed, rf, rs, config=cfg_path)

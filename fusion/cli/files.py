@@ -12,6 +12,7 @@ from fusion.cli import args as a
 from fusion.cli.progress import bar, wanted
 from fusion.cli.report import counts_line, duration, flat_counts
 from fusion.cli.runner import CliError, Exit
+from fusion.tracking.detection import Reason
 
 RRD_MAGIC = b"RRF2"
 STREAM_MAGIC = b"FUSIONST"
@@ -102,6 +103,16 @@ def _check_kind(path: Path, want: bytes) -> None:
     raise CliError(Exit.FILE, f"{path}: not {kind} (it starts with {head[:4]!r})")
 
 
+def _shown(path: Path | None) -> str:
+    """A path as a user reads it: relative to the working directory when under it."""
+    if path is None:
+        return "?"
+    try:
+        return str(path.resolve().relative_to(Path.cwd().resolve()))
+    except ValueError:
+        return str(path)
+
+
 def replay(args: argparse.Namespace) -> int:
     stream = a.input_file(args.stream, "stream file", "fusion demo and fusion serve write one (.fstream) beside "
                                                       "each recording")
@@ -129,7 +140,11 @@ def replay(args: argparse.Namespace) -> int:
             raise CliError(Exit.INTERRUPTED, f"interrupted after {done[0]} of {done[1]} samples; the partial "
                                              f"recording {out} is complete (fusion inspect {out})") from None
     line = counts_line(flat_counts(r.counts, published=r.estimates))
-    print(f"replayed {r.records} samples in {duration(time.monotonic() - t0)}: {line}")
+    cfg = _shown(r.config)
+    print(f"replayed {r.records} samples in {duration(time.monotonic() - t0)} with {cfg}: {line}")
+    if r.counts.applied == 0 and r.counts.refused.get(Reason.UNKNOWN_SENSOR):
+        print(f"hint: {cfg} configures none of the stream's sensors; give the configuration the stream was "
+              f"made with: fusion replay {stream} -c FILE")
     if args.smooth:
         rmse = ("" if r.rmse_smoothed_m is None else
                 f": position RMSE vs truth filtered {r.rmse_filtered_m:.3f} m, smoothed {r.rmse_smoothed_m:.3f} m")
