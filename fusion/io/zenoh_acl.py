@@ -35,8 +35,8 @@ With NS the namespace, what each role may do (everything else is dropped):
 
 Hence a sensor cannot forge estimates (its put on tracks is dropped at ingress), cannot answer
 for the service (its status or snapshot queryable is never declared to the node, so no query
-reaches it), cannot read the snapshot, and cannot speak for another sensor (nor a control source for
-another source); a consumer cannot publish measurements or inputs.
+reaches it), cannot read the snapshot, and cannot speak for another sensor (nor a control
+source for another source); a consumer cannot publish measurements or inputs.
 """
 
 from __future__ import annotations
@@ -102,19 +102,18 @@ def _recovering_subscriber(subscribed: list[str]) -> list[tuple[str, str, list[s
     own liveliness token (`<key>/@adv/sub/**`) in; its liveliness subscriber on the publishers'
     tokens (`<key>/@adv/pub/**`, with the liveliness query for those already there) in and the
     tokens out; its subscription to their heartbeats in and the heartbeats out; its history and
-    recovery queries (`<key>/@adv/*/**`) in and their replies, on the samples' keys, out."""
+    recovery queries (under `<key>/@adv/*/**`: the publishers' caches) in and their replies, on
+    the samples' keys, out."""
     adv_pub = [f"{key}/@adv/pub/**" for key in subscribed]
-    adv = [f"{key}/@adv/*/**" for key in subscribed]
     return [(TOKEN, IN, [f"{key}/@adv/sub/**" for key in subscribed]), (LIVE_SUB, IN, adv_pub),
             (LIVE_QUERY, IN, adv_pub), (TOKEN, OUT, adv_pub), (SUB, IN, adv_pub), (PUT, OUT, adv_pub),
-            (QUERY, IN, [*adv_pub, *adv]), (REPLY, OUT, [*subscribed, *adv_pub])]
+            (QUERY, IN, [f"{key}/@adv/*/**" for key in subscribed]), (REPLY, OUT, [*subscribed, *adv_pub])]
 
 
 def access_control_section(ac: AccessControlConfig, *, namespace: str) -> dict[str, Any]:
     """Zenoh's `access_control` configuration section (a JSON-able dict) for `ac` on `namespace`:
     default deny; one subject, one policy and its rules per role (per sensor for sensors, per
-    source for control sources);
-    roles with no names are left out."""
+    source for control sources); roles with no names are left out."""
     groups: list[tuple[str, str, str, list[str]]] = [  # (id, role, sensor or source id, common names)
         *((f"sensor-{sid}", "sensor", sid, names) for sid, names in sorted(ac.sensors.items())),
         *((f"input-{sid}", "input", sid, names) for sid, names in sorted(ac.inputs.items())),

@@ -159,8 +159,7 @@ def test_access_control_profile() -> None:
     assert {x for x in ingress if x[1] == "query"} == {
         ("view", "query", "fusion/ns/status"), ("view", "query", "fusion/ns/snapshot"),
         # the advanced subscribers' history and recovery queries
-        *((cn, "query", q) for cn in ("rec", "svc") for k in subscribed
-          for q in (f"{k}/@adv/pub/**", f"{k}/@adv/*/**"))}
+        *((cn, "query", f"{k}/@adv/*/**") for cn in ("rec", "svc") for k in subscribed)}
     assert {x for x in ingress if x[1] == "declare_subscriber"} == {
         ("view", "declare_subscriber", "fusion/ns/tracks/*"),
         *((cn, "declare_subscriber", k) for cn in ("rec", "svc") for k in samples),
