@@ -5,7 +5,8 @@ recording on its own thread against on the loop, `--pairs` interleaved pairs (be
 `--only tree_ab --base REV` (never in the default run): the working tree's service against the
 service of a git revision, `--pairs` interleaved pairs (bench.tree_ab). `--only handover` (never
 in the default run): a callback per sample against the service's channel threads, `--pairs`
-interleaved pairs (bench.intake_handover).
+interleaved pairs (bench.intake_handover). `--only recording_truth` (never in the default run):
+the recording's cost fed fast with every target's truth and without any (bench.recording_truth).
 
 Each benchmark measures its baselines in the same run, interleaved, and prints ratios. The
 machine's state (other processes) moves absolute figures; the ratios are the comparison.
@@ -49,7 +50,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--quick", action="store_true", help="fewer repeats and sizes (~1 minute)")
     p.add_argument("--only", default="e2e,core,tracker,gospa,recording,intake,late",
                    help="comma-separated: e2e, core, tracker, gospa, recording, intake, late;"
-                        " soak, recording_ab, tree_ab, handover (not in the default)")
+                        " soak, recording_ab, tree_ab, handover, recording_truth (not in the default)")
     p.add_argument("--soak-s", type=float, default=600.0, help="duration of the soak (default 600 s)")
     p.add_argument("--soak-every-s", type=float, default=10.0, help="the soak's sampling period (default 10 s)")
     p.add_argument("--pairs", type=int, default=3,
@@ -107,6 +108,10 @@ def main(argv: list[str] | None = None) -> int:
             from bench import recording_cost
 
             results["recording"] = recording_cost.run(quick=args.quick)
+        elif name == "recording_truth":
+            from bench import recording_truth
+
+            results["recording_truth"] = recording_truth.run(quick=args.quick)
         elif name == "intake":
             from bench import intake_path
 
