@@ -72,7 +72,7 @@ def publish_scenario(args: argparse.Namespace) -> int:
     import zenoh
 
     from fusion.io.zenoh_bus import zenoh_session_config
-    from publishers.publish import boot_epoch, publish
+    from publishers.publish import boot_epoch, publish, sent_words
     from publishers.stream import build_stream
 
     # Zenoh first: nothing to connect to is found out before the stream is built
@@ -85,9 +85,7 @@ def publish_scenario(args: argparse.Namespace) -> int:
         signal.signal(signal.SIGTERM, lambda *_: stop.set())
         with bar(enabled=wanted(args), desc=f"publish {path.stem}", unit="sample") as b:
             counts = publish(session, samples, speed=args.speed, stop=stop, progress=lambda n: b(n, len(samples)))
-    words = {"meas": "measurements", "truth": "truth samples"}
-    sent = " and ".join(f"{v} {words.get(k, k)}" for k, v in sorted(counts.items())) or "nothing"
-    print(f"published {sent} on fusion/{ns}/... ({sum(counts.values())} of {len(samples)} samples)")
+    print(f"published {sent_words(counts)} on fusion/{ns}/... ({sum(counts.values())} of {len(samples)} samples)")
     if stop.is_set():
         raise CliError(Exit.INTERRUPTED, "interrupted before the end of the scenario")
     return 0

@@ -25,7 +25,7 @@ from fusion.errors import FusionError
 from fusion.io.inspect import Summary, summarise
 from fusion.io.zenoh_bus import free_tcp_port, session_config
 from fusion.service import Service
-from publishers.publish import boot_epoch, publish
+from publishers.publish import boot_epoch, publish, sent_words
 from publishers.spec import load_scenario_file, scenario_path
 from publishers.stream import build_stream
 
@@ -178,8 +178,9 @@ def demo_report(r: DemoResult) -> str:
     span = "the whole scenario" if r.scenario_s is None else f"{r.scenario_s:g} s of scenario time"
     head = (f"demo {r.scenario}: interrupted after {duration(r.wall_s)}; so far:" if r.interrupted
             else f"demo {r.scenario}: {span} {how}, in {duration(r.wall_s)}")
-    sent = (f"  sent       {r.published.get('meas', 0)} measurements and {r.published.get('truth', 0)} truth samples"
-            + (f" (of {r.planned.get('meas', 0)} and {r.planned.get('truth', 0)} planned)" if r.interrupted else ""))
+    always = ("meas", "truth")  # said even when none were sent
+    sent = (f"  sent       {sent_words(r.published, always=always)}"
+            + (f" (of {sent_words(r.planned, always=always)} planned)" if r.interrupted else ""))
     files = [p for p in (r.recording, r.stream) if p.exists()]
     lines = [head, sent]
     if r.counts:
