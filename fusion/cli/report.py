@@ -86,8 +86,11 @@ def format_status(st: m.ServiceStatus, namespace: str) -> str:
         lines.append(f"  zenoh      {z.mode} {z.state} ({z.routers} routers, {z.peers} peers; "
                      f"{z.connect_attempts} attempts to start{again})")
     for sensor, lat in sorted(st.latency.items()):
+        # arrival - sensor time: below 0 when the sensor's times run ahead of their arrival
+        ahead = (" (below 0: its times are ahead of when they arrive; a publisher faster than real time, or a clock "
+                 "ahead of this machine's)" if lat.p50_ms < 0 else "")
         lines.append(f"  latency    {sensor}: mean {lat.mean_ms:.1f} ms, p50 {lat.p50_ms:.1f}, p99 {lat.p99_ms:.1f}, "
-                     f"max {lat.max_ms:.1f} ms over {lat.count} measurements")
+                     f"max {lat.max_ms:.1f} ms over {lat.count} measurements{ahead}")
     for sensor, g in sorted(st.gaps.items()):
         runs = f", {g.restarts} publisher restarts" if g.restarts else ""
         zen = f", {g.zenoh_missed} reported missed by zenoh" if g.zenoh_missed else ""
