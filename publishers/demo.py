@@ -41,7 +41,7 @@ def default_out(scenario: str) -> Path:
 class DemoResult:
     recording: Path
     stream: Path
-    published: dict[str, int]  # samples put on Zenoh, by kind ("meas", "truth")
+    published: dict[str, int]  # samples put on Zenoh, by kind ("meas", "input", "truth")
     estimates_published: int
     summary: Summary
     wall_s: float
