@@ -80,15 +80,15 @@ def publish(session: Any, samples: Sequence[Sample], *, speed: float = 1.0, matc
     return counts
 
 
-_KINDS = (("meas", "measurements"), ("input", "control inputs"), ("truth", "truth samples"))
+_KINDS = {"meas": "measurements", "input": "control inputs", "truth": "truth samples"}  # in the order said
 
 
 def sent_words(counts: Mapping[str, int], *, always: tuple[str, ...] = ()) -> str:
     """Samples by kind (`publish`'s counts: "meas", "input", "truth") as words, in that order:
     "6496 measurements and 3600 truth samples", "100 measurements, 100 control inputs and 100
     truth samples"; kinds with none are left out unless in `always`; "nothing" if none at all."""
-    parts = [f"{counts.get(k, 0)} {w}" for k, w in _KINDS if counts.get(k, 0) or k in always]
-    parts += [f"{n} {k}" for k, n in sorted(counts.items()) if k not in dict(_KINDS) and n]
+    parts = [f"{counts.get(k, 0)} {w}" for k, w in _KINDS.items() if counts.get(k, 0) or k in always]
+    parts += [f"{n} {k}" for k, n in sorted(counts.items()) if k not in _KINDS and n]
     if not parts:
         return "nothing"
     return parts[0] if len(parts) == 1 else ", ".join(parts[:-1]) + " and " + parts[-1]
