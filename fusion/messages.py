@@ -211,7 +211,10 @@ class LatencyStats(Base, kw_only=True):
 
 class Counts(Base, kw_only=True):
     """received = applied + inputs + truth + duplicates + sum(refused.values()) + queued (inputs:
-    control inputs applied; 0 from a service before they were counted here)."""
+    control inputs applied; 0 from a service before they were counted here). Of the duplicates
+    and refused, inputs_refused were control inputs and truth_refused truth samples (0 from a
+    service before they were counted); the rest measurements, or samples refused before their
+    kind was read (the intake queue's reasons)."""
 
     received: int
     applied: int
@@ -223,6 +226,8 @@ class Counts(Base, kw_only=True):
     published: int
     truth: int
     inputs: int = 0
+    inputs_refused: int = 0
+    truth_refused: int = 0
 
 
 class SeqGapStats(Base, kw_only=True):

@@ -104,6 +104,7 @@ class Pipeline:
         self._received = 0
         self._truth = 0
         self._refused: dict[Reason, int] = {}  # at the edge, before the tracker
+        self._refused_kinds = {"input": 0, "truth": 0}  # of them, on input and truth keys
         self._routes: dict[str, tuple[str, str]] = {}  # key expression -> (kind, key id)
         # per configured sensor, the batch's (latencies, epochs, seqs) not yet counted (_checked)
         self._pending: dict[str, tuple[list[int], list[int], list[int]]] = {}
@@ -121,10 +122,14 @@ class Pipeline:
         for r, n in self._refused.items():
             refused[r] = refused.get(r, 0) + n
         return dataclasses.replace(c, received=self._received - len(self._held), truth=self._truth,
-                                   refused=dict(sorted(refused.items())))
+                                   inputs_refused=c.inputs_refused + self._refused_kinds["input"],
+                                   truth_refused=self._refused_kinds["truth"], refused=dict(sorted(refused.items())))
 
-    def _refuse(self, reason: Reason, key: str, detail: str, t_ns: int = 0) -> None:
+    def _refuse(self, reason: Reason, key: str, detail: str, t_ns: int = 0, kind: str = "meas") -> None:
+        """Count and say a sample refused at the edge; `kind` its key's (fusion.io.wire.Codec.kind)."""
         self._refused[reason] = self._refused.get(reason, 0) + 1
+        if kind in self._refused_kinds:
+            self._refused_kinds[kind] += 1
         self.warn.warn(reason.value, "refused sample on %s: %s: %s", key, reason.value, detail)
         if self.sink is not None:
             self.sink.log_text(t_ns, f"refused sample on {key}: {reason.value}: {detail}", "WARN")
@@ -148,7 +153,7 @@ class Pipeline:
             elif kind == "truth":
                 tr = self.codec.truth(payload, self.tracker.layout)
                 if tr is not None and tr[0] != key_id:
-                    self._refuse(Reason.KEY_MISMATCH, key, f"truth of {tr[0]!r} on another target's key")
+                    self._refuse(Reason.KEY_MISMATCH, key, f"truth of {tr[0]!r} on another target's key", kind=kind)
                     return None
                 self._truth += 1
                 if tr is not None and self.sink is not None:
@@ -157,24 +162,25 @@ class Pipeline:
             elif kind == "input":
                 c = self.codec.control(payload, arrival_ns)
                 if c.source_id != key_id:
-                    self._refuse(Reason.KEY_MISMATCH, key, f"an input of {c.source_id!r} on another source's key")
+                    self._refuse(Reason.KEY_MISMATCH, key, f"an input of {c.source_id!r} on another source's key",
+                                 kind=kind)
                     return None
                 return c
             else:
                 self._refuse(Reason.INVALID, key, "not a measurement, input or truth key")
                 return None
         except MalformedMessageError as e:
-            self._refuse(Reason.MALFORMED, key, str(e))
+            self._refuse(Reason.MALFORMED, key, str(e), kind=kind)
             return None
         except UnsupportedVersionError as e:
-            self._refuse(Reason.UNSUPPORTED_VERSION, key, str(e))
+            self._refuse(Reason.UNSUPPORTED_VERSION, key, str(e), kind=kind)
             return None
         except InvalidMessageError as e:
-            self._refuse(Reason.INVALID, key, str(e))
+            self._refuse(Reason.INVALID, key, str(e), kind=kind)
             return None
         except Exception as e:  # a decoder bug must cost one sample, never the service
             log.exception("unexpected error decoding a sample on %s", key)
-            self._refuse(Reason.MALFORMED, key, f"{type(e).__name__}: {e}")
+            self._refuse(Reason.MALFORMED, key, f"{type(e).__name__}: {e}", kind=kind)
             return None
         return self._checked(d, key, key_id, arrival_ns)
 

@@ -17,11 +17,13 @@ from fusion.tracking.results import Counts
 def counts_line(c: Mapping[str, Any]) -> str:
     """received = applied + inputs + truth + duplicates + refused + queued, said for measurements
     (the truth samples a simulator sends beside them are not measurements; control inputs are
-    said apart)."""
+    said apart, applied or not: inputs + inputs_refused; truth_refused: truth samples among the
+    refused)."""
     refused: Mapping[str, int] = c.get("refused", {})
     n_ref = sum(refused.values())
-    inputs = int(c.get("inputs", 0))
-    measurements = c["received"] - int(c.get("truth", 0)) - inputs
+    inputs_refused, truth_refused = int(c.get("inputs_refused", 0)), int(c.get("truth_refused", 0))
+    inputs = int(c.get("inputs", 0)) + inputs_refused
+    measurements = c["received"] - int(c.get("truth", 0)) - truth_refused - inputs
     parts = [f"{c['applied']} applied", f"{c['duplicates']} duplicates dropped",
              f"{n_ref} refused" + (" (" + ", ".join(f"{k} {v}" for k, v in sorted(refused.items())) + ")"
                                    if refused else "")]
@@ -29,6 +31,9 @@ def counts_line(c: Mapping[str, Any]) -> str:
         parts.append(f"{c['queued']} not yet processed")
     line = (f"received {measurements} measurements" + (f" and {inputs} control inputs" if inputs else "") + ": "
             + ", ".join(parts))
+    others = [f"{word} {n}" for n, word in ((inputs_refused, "control inputs"), (truth_refused, "truth samples")) if n]
+    if others:
+        line += "; of the duplicates and refused: " + ", ".join(others)
     if c.get("late_applied"):
         line += f"; {c['late_applied']} late ones folded in by {c['replays']} replay{'s' if c['replays'] != 1 else ''}"
     return line + f"; published {c['published']} estimates"
@@ -39,8 +44,8 @@ def flat_counts(c: Counts, *, published: int) -> dict[str, Any]:
     duplicates apart from the other refusals, reasons that did not happen left out."""
     refused = {r.value: n for r, n in sorted(c.refused.items()) if n and r != Reason.DUPLICATE}
     return {"received": c.received, "applied": c.applied, "duplicates": c.duplicates, "refused": refused,
-            "truth": c.truth, "inputs": c.inputs, "late_applied": c.late_applied, "replays": c.replays,
-            "published": published}
+            "truth": c.truth, "inputs": c.inputs, "inputs_refused": c.inputs_refused, "truth_refused": c.truth_refused,
+            "late_applied": c.late_applied, "replays": c.replays, "published": published}
 
 
 def size(n_bytes: int) -> str:
@@ -60,11 +65,12 @@ def format_status(st: m.ServiceStatus, namespace: str) -> str:
     tracks = ", ".join(f"{v} {k}" for k, v in sorted(st.tracks.items())) or "none"
     counts = {"received": c.received, "applied": c.applied, "duplicates": c.duplicates, "refused": c.refused,
               "queued": c.queued, "late_applied": c.late_applied, "replays": c.replays, "published": c.published,
-              "truth": c.truth, "inputs": c.inputs}
+              "truth": c.truth, "inputs": c.inputs, "inputs_refused": c.inputs_refused,
+              "truth_refused": c.truth_refused}
     lines = [
         f"fusion service on namespace {namespace!r}, up {duration(st.uptime_s)}",
         f"  samples    {counts_line(counts)}",
-        f"  truth      {c.truth} samples",
+        f"  truth      {c.truth} samples" + (f" ({c.truth_refused} more refused)" if c.truth_refused else ""),
         f"  tracks     {tracks}",
         f"  queue      {st.queue_depth} waiting",
         "  recording  " + (f"{st.recording} ({size(st.recording_bytes)}"

@@ -236,7 +236,9 @@ class Counts:
 
     Intake: received = applied + inputs + truth + sum(refused.values()) (applied: measurements;
     inputs: control inputs; duplicates are refused with reason "duplicate"; truth samples are
-    counted by the pipeline, 0 in a bare tracker).
+    counted by the pipeline, 0 in a bare tracker). Of the refused, inputs_refused were control
+    inputs and truth_refused truth samples (the pipeline's), whatever the reason; the rest were
+    measurements.
     What the data did (a function of the accepted measurements, whatever their arrival order):
     updates, births, births_refused_capacity, unassigned (in a gate, taken by no track; such a
     measurement starts a track like any other), confirmations, deletions by reason,
@@ -249,6 +251,8 @@ class Counts:
     applied: int = 0
     truth: int = 0
     inputs: int = 0
+    inputs_refused: int = 0
+    truth_refused: int = 0
     refused: Mapping[Reason, int] = field(default_factory=dict)
     updates: int = 0
     births: int = 0
@@ -268,9 +272,10 @@ class Counts:
 
     def flat(self) -> dict[str, int]:
         """Every count under a path-like name ("refused/duplicate", "deletions/misses"), sorted."""
-        out = {k: getattr(self, k) for k in ("received", "applied", "inputs", "truth", "updates", "births",
-                                             "births_refused_capacity", "unassigned", "confirmations",
-                                             "numerical_skips", "replays", "replayed_scans", "rescans", "late_applied")}
+        names = ("received", "applied", "inputs", "inputs_refused", "truth", "truth_refused", "updates", "births",
+                 "births_refused_capacity", "unassigned", "confirmations", "numerical_skips", "replays",
+                 "replayed_scans", "rescans", "late_applied")
+        out = {k: getattr(self, k) for k in names}
         out.update({f"refused/{r.value}": n for r, n in self.refused.items()})
         out.update({f"deletions/{r.value.replace(' ', '_')}": n for r, n in self.deletions.items()})
         return dict(sorted(out.items()))

@@ -88,7 +88,7 @@ class Tracker:
         self._ts = TrackSet.start(Layout(self.position_indices, self.velocity_indices, tuple(sorted(self.sensors)),
                                          self.motion.ndim_state, len(getattr(self.filter, "filters", ()))))
         # the counters behind `counts` (and a checkpoint): intake, refusals, arrivals
-        self.intake_counts = {"received": 0, "applied": 0, "inputs": 0}
+        self.intake_counts = {"received": 0, "applied": 0, "inputs": 0, "inputs_refused": 0}
         self.refused_counts: dict[Reason, int] = {}
         self.arrival_counts = {"replays": 0, "replayed_scans": 0, "rescans": 0, "late_applied": 0}
 
@@ -142,7 +142,7 @@ class Tracker:
         t = self.history.tally()
         return Counts(
             received=self.intake_counts["received"], applied=self.intake_counts["applied"],
-            inputs=self.intake_counts["inputs"],
+            inputs=self.intake_counts["inputs"], inputs_refused=self.intake_counts["inputs_refused"],
             refused=dict(sorted(self.refused_counts.items())), updates=t[Tally.UPDATES], births=t[Tally.BIRTHS],
             births_refused_capacity=t[Tally.BIRTHS_REFUSED_CAPACITY], unassigned=t[Tally.UNASSIGNED],
             confirmations=t[Tally.CONFIRMATIONS], numerical_skips=t[Tally.NUMERICAL_SKIPS],
@@ -234,6 +234,8 @@ class Tracker:
                     c, bad = self.intake.admit_input(d)
                     if c is not None:
                         inputs.append(c)
+                    else:
+                        self.intake_counts["inputs_refused"] += 1
                 else:
                     ok, bad = self.intake.admit(d)
                     if ok is not None:

@@ -229,8 +229,9 @@ def test_ctrl_c_ends_a_recording(tmp_path: Path) -> None:
 
 def test_replay_says_its_configuration_and_hints_when_it_has_none_of_the_sensors(tmp_path: Path) -> None:
     """A .jsonl of cv1d_d's messages has no namespace: replayed without -c it runs with the
-    demo namespace's scenario (mix), which has none of its sensors. The summary names the
-    configuration used and says what to do; with -c it applies everything."""
+    demo namespace's scenario (mix), which has none of its sensors nor its control source. The
+    summary names the configuration used, tells the refused control inputs from the measurements
+    and says what to do; with -c it applies everything."""
     from fusion import messages as m
     from publishers.spec import load_scenario_file, scenario_path
     from publishers.stream import build_stream
@@ -242,6 +243,9 @@ def test_replay_says_its_configuration_and_hints_when_it_has_none_of_the_sensors
     used = re.search(r"replayed 300 samples in .* with (\S*configs/scenarios/mix\.toml): .* 0 applied", r.stdout)
     assert used, r.stdout
     assert "configures none of the stream's sensors" in r.stdout and "fusion replay s.jsonl -c FILE" in r.stdout
+    # the refused control inputs are said as such, not counted among the measurements
+    assert ("received 100 measurements and 100 control inputs: 0 applied, 0 duplicates dropped, 200 refused "
+            "(unknown_sensor 200); of the duplicates and refused: control inputs 100") in r.stdout, r.stdout
     r = run("fusion", "replay", "s.jsonl", "-o", "b.rrd", "-c", str(scenario_path("cv1d_d")), cwd=tmp_path)
     assert r.returncode == 0, r.stderr
     assert "received 100 measurements and 100 control inputs: 100 applied" in r.stdout, r.stdout
