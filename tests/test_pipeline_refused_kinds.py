@@ -41,6 +41,7 @@ def test_refused_inputs_and_truth_are_counted_by_kind() -> None:
     pipe.ingest(records)
     c = pipe.counts()
     assert (c.applied, c.inputs, c.truth, c.inputs_refused, c.truth_refused) == (100, 100, 100, 0, 0)
+    assert "inputs_refused" not in c.flat() and "truth_refused" not in c.flat()  # like refused/<reason>: once any
 
     last = records[-1][0]
     an_input = next(r for r in records if "/input/" in r[1])
@@ -78,7 +79,8 @@ def test_inputs_of_an_unconfigured_source_are_not_said_to_be_measurements() -> N
     assert (c.applied, c.inputs, c.inputs_refused, c.refused) == (0, 0, 100, {Reason.UNKNOWN_SENSOR: 200})
     assert counts_line(flat_counts(c, published=0)) == (
         "received 100 measurements and 100 control inputs: 0 applied, 0 duplicates dropped, 200 refused "
-        "(unknown_sensor 200); of the duplicates and refused: control inputs 100; published 0 estimates")
+        "(unknown_sensor 200); of the duplicates and refused: control inputs 100; published 0 estimate messages "
+        "(revisions included)")
 
 
 def test_a_status_from_before_the_kinds_were_counted_reads_as_before() -> None:

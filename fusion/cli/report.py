@@ -36,7 +36,7 @@ def counts_line(c: Mapping[str, Any]) -> str:
         line += "; of the duplicates and refused: " + ", ".join(others)
     if c.get("late_applied"):
         line += f"; {c['late_applied']} late ones folded in by {c['replays']} replay{'s' if c['replays'] != 1 else ''}"
-    return line + f"; published {c['published']} estimates"
+    return line + f"; published {c['published']} estimate messages (revisions included)"
 
 
 def flat_counts(c: Counts, *, published: int) -> dict[str, Any]:

@@ -271,11 +271,12 @@ class Counts:
         return self.refused.get(Reason.DUPLICATE, 0)
 
     def flat(self) -> dict[str, int]:
-        """Every count under a path-like name ("refused/duplicate", "deletions/misses"), sorted."""
-        names = ("received", "applied", "inputs", "inputs_refused", "truth", "truth_refused", "updates", "births",
-                 "births_refused_capacity", "unassigned", "confirmations", "numerical_skips", "replays",
-                 "replayed_scans", "rescans", "late_applied")
-        out = {k: getattr(self, k) for k in names}
+        """Every count under a path-like name ("refused/duplicate", "deletions/misses"), sorted; like
+        the refusals by reason, the refused inputs and truth samples are there once there were any."""
+        out = {k: getattr(self, k) for k in ("received", "applied", "inputs", "truth", "updates", "births",
+                                             "births_refused_capacity", "unassigned", "confirmations",
+                                             "numerical_skips", "replays", "replayed_scans", "rescans", "late_applied")}
+        out.update({k: getattr(self, k) for k in ("inputs_refused", "truth_refused") if getattr(self, k)})
         out.update({f"refused/{r.value}": n for r, n in self.refused.items()})
         out.update({f"deletions/{r.value.replace(' ', '_')}": n for r, n in self.deletions.items()})
         return dict(sorted(out.items()))

@@ -12,7 +12,7 @@ from fusion.tracking.results import Counts
 BASE = {"received": 838, "applied": 530, "duplicates": 4, "refused": {"invalid": 4}, "queued": 0, "truth": 300,
         "late_applied": 8, "replays": 1, "published": 389}
 LINE = ("received 538 measurements: 530 applied, 4 duplicates dropped, 4 refused (invalid 4); 8 late ones folded "
-        "in by 1 replay; published 389 estimates")
+        "in by 1 replay; published 389 estimate messages (revisions included)")
 
 
 def test_counts_line_says_measurements_not_truth_samples() -> None:
@@ -29,7 +29,7 @@ def test_flat_pipeline_counts() -> None:
 def test_queued_and_no_late() -> None:
     c = dict(BASE, received=840, queued=2, late_applied=0, replays=0, refused={})
     assert counts_line(c) == ("received 540 measurements: 530 applied, 4 duplicates dropped, 0 refused, 2 not yet "
-                              "processed; published 389 estimates")
+                              "processed; published 389 estimate messages (revisions included)")
 
 
 def test_control_inputs_are_said_apart() -> None:
@@ -37,7 +37,7 @@ def test_control_inputs_are_said_apart() -> None:
     c = Counts(received=300, truth=100, inputs=100, applied=100)
     assert counts_line(flat_counts(c, published=99)) == ("received 100 measurements and 100 control inputs: "
                                                          "100 applied, 0 duplicates dropped, 0 refused; "
-                                                         "published 99 estimates")
+                                                         "published 99 estimate messages (revisions included)")
 
 
 def _estimate(track_id: int, x: float) -> m.Estimate:
@@ -64,7 +64,7 @@ def test_status_text() -> None:
                          recording_bytes=2_000_000, queue_depth=0)
     text = format_status(st, "demo")
     assert text.splitlines()[0] == "fusion service on namespace 'demo', up 2 min 5 s"
-    assert "received 10 measurements: 9 applied, 1 duplicates dropped, 0 refused; published 7 estimates" in text
+    assert "received 10 measurements: 9 applied, 1 duplicates dropped, 0 refused; published 7 estimate messages" in text
     assert "2 confirmed, 1 tentative" in text and "r.rrd (2.0 MB)" in text
     behind = format_status(msgspec.structs.replace(st, recording_queue=1234), "demo")
     assert "r.rrd (2.0 MB; 1234 rows still to write)" in behind
