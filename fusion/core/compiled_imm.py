@@ -17,7 +17,9 @@ mu_k, switching matrices Pi_k, predicted probabilities c_k = mu_k Pi_k, computed
     innovate_modes:  each mode's S_kj, NIS and log-likelihood of its innovation y_kj, pair k
                      of predicted state rows[k] (compiled_stack.innovate_into per pair and mode);
     mixture_many:    the mixture innovation y_k = sum_j c_kj y_kj and
-                     S_k = sum_j c_kj S_kj + sum_j (c_kj d_kj) d_kj', d_kj = y_kj - y_k;
+                     S_k = sum_j c_kj S_kj + sum_j (c_kj d_kj) d_kj', d_kj = y_kj - y_k, and
+                     its NIS y_k' S_k^-1 y_k (numba's LAPACK solve: the same bits as numpy's
+                     batched solve, bench.compiled_bits);
     posterior_many:  each mode's EKF update of the pairs `rows` (predicted state at[k] of pair
                      k; compiled.update_work) and their combination with the posterior
                      probabilities.
@@ -110,10 +112,11 @@ def innovate_modes(Ps: np.ndarray, rows: np.ndarray, Y: np.ndarray, H: np.ndarra
 
 
 @njit(cache=True, fastmath=False)
-def mixture_many(c: np.ndarray, ys: np.ndarray, Ss: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def mixture_many(c: np.ndarray, ys: np.ndarray, Ss: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     N, M, m = ys.shape
     y = np.zeros((N, m))
     S = np.empty((N, m, m))
+    nis = np.empty(N)
     A = np.empty((m, m))
     B = np.empty((m, m))
     for k in range(N):
@@ -131,7 +134,23 @@ def mixture_many(c: np.ndarray, ys: np.ndarray, Ss: np.ndarray) -> tuple[np.ndar
         for a in range(m):
             for b in range(m):
                 S[k, a, b] = A[a, b] + B[a, b]
-    return y, S
+        nis[k] = _quadratic(y[k], np.linalg.solve(S[k], y[k]))
+    return y, S, nis
+
+
+@njit(cache=True, fastmath=False)
+def _quadratic(y: np.ndarray, w: np.ndarray) -> float:
+    """sum_a y_a w_a in numpy einsum's order for a short contiguous axis ("ka,ka->k"): the even
+    terms, the odd terms, then the two (bench.compiled_bits: the same bits for 1 to 5 terms)."""
+    even = y[0] * w[0]
+    for a in range(2, y.shape[0], 2):
+        even += y[a] * w[a]
+    if y.shape[0] > 1:
+        odd = y[1] * w[1]
+        for a in range(3, y.shape[0], 2):
+            odd += y[a] * w[a]
+        even += odd
+    return even
 
 
 @njit(cache=True, fastmath=False)

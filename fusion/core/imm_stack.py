@@ -173,12 +173,12 @@ def innovate_imm(pred: StackPrediction, rows: np.ndarray, Z: Array, R: Array, mo
     mu = np.exp(a - mix_ll[:, None])
     mu = mu / mu.sum(axis=1, keepdims=True)
     if M == 2:  # numpy's einsum sums longer mode axes in another order (the mixture is bit for bit its)
-        y, S = mixture_many(_f64(c), ys, Ss)
+        y, S, nis = mixture_many(_f64(c), ys, Ss)
     else:
         y = np.einsum("km,kma->ka", c, ys)
         dy = ys - y[:, None, :]
         S = np.einsum("km,kmab->kab", c, Ss) + np.einsum("km,kma,kmb->kab", c, dy, dy)
-    nis = np.einsum("ka,ka->k", y, np.linalg.solve(S, y[..., None])[..., 0])
+        nis = np.einsum("ka,ka->k", y, np.linalg.solve(S, y[..., None])[..., 0])
     return StackInnovation(ys, Ss, Hs, mu, y, S, nis, mix_ll, R, rows)
 
 
