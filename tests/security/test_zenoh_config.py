@@ -186,17 +186,36 @@ def test_access_control_profile() -> None:
     ('[zenoh.access_control.sensors]\n"cam1\\n" = ["s"]', r"zenoh\.access_control\.sensors: a key: Expected str"),
     ('[zenoh.access_control.sensors]\n"a/b" = ["s"]', r"zenoh\.access_control\.sensors: a key: Expected str"),
     ('[zenoh.access_control.inputs]\n"*" = ["s"]', r"zenoh\.access_control\.inputs: a key: Expected str"),
+    ('[zenoh.access_control.sensors]\ncam2 = ["s"]',  # a typo: cam1 would get no grant, its data dropped unsaid
+     r"zenoh\.access_control\.sensors: 'cam2' is not a sensor of \[tracker\] \(its sensors: cam1, radar1\)"),
+    ('[zenoh.access_control.inputs]\ncontrol = ["s"]',
+     r"zenoh\.access_control\.inputs: 'control' is not the tracker's control source \(it has none"),
     ('[zenoh.access_control]\nconsumers = [""]', r"zenoh\.access_control\.consumers\[0\]"),
     ('[zenoh.access_control]\nconsumers = [" viewer"]', r"zenoh\.access_control\.consumers\[0\]"),
     ('[zenoh.access_control]\nenabled = true', "unknown key 'enabled'"),
     ('[zenoh.tls]\nroot_ca = "ca.pem"\nverify = false', "unknown key 'verify'"),
     ('[zenoh.tls]\ncertificate = "c.pem"', "required key 'root_ca' is missing"),
-], ids=["newline in sensor id", "slash in sensor id", "wildcard in source id", "empty name", "blank around name",
+], ids=["newline in sensor id", "slash in sensor id", "wildcard in source id", "unknown sensor id",
+        "no control source", "empty name", "blank around name",
         "enabled", "unknown tls field", "tls without root_ca"])
 def test_config_sections_refuse_mistakes(section: str, match: str) -> None:
     svc = (ROOT / "configs" / "service.toml").read_text()
     with pytest.raises(ConfigError, match=match):
         decode_service_config(svc + "\n" + section + "\n")
+
+
+def test_access_control_names_a_configured_control_source() -> None:
+    """cv1d_d's tracker takes inputs from "control": a grant for it is accepted, one for another id
+    is refused with the id the tracker has."""
+    from publishers.spec import scenario_path
+
+    text = scenario_path("cv1d_d").read_text()
+    assert 'source_id = "control"' in text
+    ok = decode_service_config(text + '\n[service.zenoh.access_control.inputs]\ncontrol = ["input-control"]\n')
+    assert ok.zenoh.access_control is not None and ok.zenoh.access_control.inputs == {"control": ["input-control"]}
+    with pytest.raises(ConfigError, match="'wheel' is not the tracker's control source "
+                                          r"\(tracker.control.source_id is 'control'\)"):
+        decode_service_config(text + '\n[service.zenoh.access_control.inputs]\nwheel = ["input-control"]\n')
 
 
 def test_cli_zenoh_config(tmp_path: Path) -> None:
