@@ -43,6 +43,7 @@ def build_parser() -> argparse.ArgumentParser:
     serve.add(sub, common)
     query.add(sub, common)
     files.add(sub, common)
+    p.commands = tuple(sub.choices)
     return p
 
 

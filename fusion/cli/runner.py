@@ -116,9 +116,14 @@ def classify(exc: BaseException, *, where: str = "") -> CliError:
 
 
 class Parser(argparse.ArgumentParser):
-    """argparse with one-line errors: `fusion demo: error: ...; see fusion demo --help`."""
+    """argparse with one-line errors: `fusion demo: error: ...; see fusion demo --help`. A parser
+    of commands (`commands` set) run without one names them."""
+
+    commands: tuple[str, ...] = ()
 
     def error(self, message: str) -> None:  # type: ignore[override]
+        if self.commands and message.startswith("the following arguments are required: COMMAND"):
+            message = f"which command? one of {', '.join(self.commands)} (start with `{self.prog} demo`)"
         raise CliError(Exit.USAGE, f"{message} (see {self.prog} --help)", where=self.prog)
 
 

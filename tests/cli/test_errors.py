@@ -28,12 +28,14 @@ GOOD_SENSORS = '[[tracker.sensors]]\nid = "cam1"\nkind = "cartesian"\nstd_m = [1
     (["fusion", "demo", "-o", "out.txt"], r"ends in \.rrd"),
     (["fusion", "serve"], r"required: -c/--config"),
     (["fusion", "nosuch"], r"invalid choice: 'nosuch'"),
+    (["fusion"], r"which command\? one of demo, serve, record, status, tracks, replay, inspect \(start with `fusion "
+                 r"demo`\)"),
     (["fusion", "status", "-e", "127.0.0.1:7447"], r"not a Zenoh endpoint.*tcp/127\.0\.0\.1:7447"),
     (["fusion", "status", "-m", "peer"], r"a peer needs an endpoint to listen on: add -l"),
     (["fusion", "record", "-n", "a/b"], r"a namespace is 1-64 of letters"),
     (["fusion-publish", "-s", "mix", "--speed", "0"], r"--speed: must be a positive factor"),
 ], ids=["scenario", "scenario-near-miss", "publish-scenario", "speed", "duration", "seed", "out-suffix",
-        "missing-config", "command", "endpoint", "peer-without-listen", "namespace", "publish-speed"])
+        "missing-config", "command", "no-command", "endpoint", "peer-without-listen", "namespace", "publish-speed"])
 def test_bad_arguments(argv: list[str], expected: str, tmp_path: Path) -> None:
     r = run(*argv, cwd=tmp_path)
     assert r.returncode == Exit.USAGE, r.stderr
