@@ -431,25 +431,6 @@ class ServiceConfig(Section):
     publish_tentative: bool = False
     warnings_per_minute: Annotated[int, msgspec.Meta(ge=1)] = 60
 
-    def __post_init__(self) -> None:
-        """The access-control roles name this tracker's sensors and control source: a grant on
-        another id lets nothing the service uses through, and the id it was meant for gets none
-        (zenoh drops its samples without a word)."""
-        ac = self.zenoh.access_control
-        if ac is None:
-            return
-        sensors = sorted(s.id for s in self.tracker.sensors)
-        for sid in sorted(ac.sensors):
-            if sid not in sensors:
-                raise ValueError(f"zenoh.access_control.sensors: {sid!r} is not a sensor of [tracker] (its sensors: "
-                                 f"{', '.join(sensors)}); a grant must name the sensor whose key it opens")
-        source = None if self.tracker.control is None else self.tracker.control.source_id
-        for sid in sorted(ac.inputs):
-            if sid != source:
-                raise ValueError(f"zenoh.access_control.inputs: {sid!r} is not the tracker's control source ("
-                                 + ("it has none: [tracker.control] is not set" if source is None
-                                    else f"tracker.control.source_id is {source!r}") + ")")
-
 
 def decode_service_config(data: bytes | str, *, source: str = "service configuration") -> ServiceConfig:
     """ServiceConfig from TOML text; errors name the source, line and field (fusion.config_errors).

@@ -38,7 +38,7 @@ import numpy as np
 from fusion import messages as m
 from fusion.config import ServiceConfig, mode_names
 from fusion.fixed_lag import FixedLagSmoother, smoothed_key
-from fusion.io import wire
+from fusion.io import wire, zenoh_acl
 from fusion.io.burst import Drained, drain_burst
 from fusion.io.channel_intake import ChannelIntake, Taken
 from fusion.io.checkpointer import Checkpointer, counts_since, service_checkpoint_path
@@ -231,6 +231,8 @@ class Service:
         self._channels = ChannelIntake([d.handler for d in self._decls[:3]], self._take)
         log.info("fusion service on namespace %r, zenoh %s %s", self.ns, zc.mode, zc.listen if zc.mode == "peer"
                  else zc.connect)
+        for words in zenoh_acl.mismatches(zc.access_control, self.config.tracker):
+            log.warning("access control: %s", words)
 
     # ---- the loop ------------------------------------------------------------------------------
     def stop(self) -> None:

@@ -43,7 +43,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from fusion.config import AccessControlConfig
+from fusion.config import AccessControlConfig, TrackerConfig
 
 PUT, SUB, QUERY, REPLY, QUERYABLE = "put", "declare_subscriber", "query", "reply", "declare_queryable"
 TOKEN, LIVE_QUERY, LIVE_SUB = "liveliness_token", "liveliness_query", "declare_liveliness_subscriber"
@@ -136,3 +136,28 @@ def access_control_section(ac: AccessControlConfig, *, namespace: str) -> dict[s
         policies.append({"id": gid, "rules": ids, "subjects": [gid]})
     return {"enabled": True, "default_permission": "deny", "rules": rules, "subjects": subjects,
             "policies": policies}
+
+
+def mismatches(ac: AccessControlConfig | None, tracker: TrackerConfig) -> list[str]:
+    """What in [zenoh.access_control] (`ac`) does not meet the tracker, in words (none: they meet): a
+    grant for a sensor id or control source the tracker does not have (the service ignores what
+    comes there: a typo leaves the real one without a grant, and zenoh drops its samples without
+    a word; or it is meant for a recorder alone), and a sensor or control source of the tracker
+    that nobody may put, no simulator being named either."""
+    if ac is None:
+        return []
+    sensors = sorted(s.id for s in tracker.sensors)
+    source = None if tracker.control is None else tracker.control.source_id
+    out = [f"zenoh.access_control.sensors grants {sid!r}, which is not a sensor of [tracker] (its sensors: "
+           f"{', '.join(sensors)}): the service ignores its measurements" for sid in sorted(ac.sensors)
+           if sid not in sensors]
+    out += [f"zenoh.access_control.inputs grants {sid!r}, which is not the tracker's control source ("
+            + ("it has none" if source is None else f"{source!r}") + "): the service ignores its inputs"
+            for sid in sorted(ac.inputs) if sid != source]
+    if not ac.simulators:
+        out += [f"sensor {sid!r} has no grant in zenoh.access_control.sensors and no simulators are named: "
+                "nothing may put its measurements" for sid in sensors if sid not in ac.sensors]
+        if source is not None and source not in ac.inputs:
+            out.append(f"control source {source!r} has no grant in zenoh.access_control.inputs and no simulators are "
+                       "named: nothing may put its inputs")
+    return out

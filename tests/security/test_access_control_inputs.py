@@ -106,16 +106,22 @@ def test_an_input_source_puts_its_own_inputs_only(certs: Certs, tmp_path: Path,
 
 
 def test_a_recorder_gets_the_history_and_recovers_a_dropped_sample(certs: Certs, tmp_path: Path,
-                                                                   tls_client: Callable[..., Any]) -> None:
+                                                                   tls_client: Callable[..., Any],
+                                                                   caplog: pytest.LogCaptureFixture) -> None:
     """cam1 puts 5 measurements, then a recorder joins: it gets them from cam1's cache (the
     advanced subscriber's history). cam1 then puts 5 more, of which seq 7 and the last are
     dropped as they leave it (a low-pass filter on its session): the recorder recovers both, as
-    the service does, and reports nothing missed."""
+    the service does, and reports nothing missed. The service, whose tracker here has no control
+    source, says at start that the grant for one is not its own (fusion.io.zenoh_acl.mismatches)."""
     cfg, _ = _cv1d_d()
     ns = cfg.namespace
     cfg = msgspec.structs.replace(cfg, tracker=scenario_config("mix")[1].tracker)  # a tracker with cam1
     cam1 = cam1_measurement
-    with tls_service(cfg, certs, tmp_path, access_control=ACL) as (svc, endpoint):
+    with caplog.at_level(logging.WARNING, logger="fusion.service"), \
+            tls_service(cfg, certs, tmp_path, access_control=ACL) as (svc, endpoint):
+        said = [r.getMessage() for r in caplog.records if r.name == "fusion.service"]
+        assert ("access control: zenoh.access_control.inputs grants 'control', which is not the tracker's control "
+                "source (it has none): the service ignores its inputs") in said, said
         cam = lossy_client(certs, endpoint, "sensor-cam1", ns)
         rec = None
         try:
