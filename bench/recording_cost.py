@@ -15,7 +15,7 @@ Baseline: the same pipeline with the recording off, interleaved with it in every
 Reported, per measurement: the cost = (with - without) / measurements, in wall time (the
 machine's load makes it noisy) and in CPU time of the whole process (time.process_time: every
 thread, Rerun's encoding and writing threads too, which share the 2 cores; other processes do not
-count); and the CPU time inside the sink's calls (log_truth, log_step, maybe_flush; thread
+count); and the CPU time inside the sink's calls (log_truths, log_step, maybe_flush; thread
 time, less what the timer itself adds to each call: timer_overhead_s, measured in the run and
 printed). Measured: the scans after the first WARM_S wall seconds of the recording-on run (the same scans
 in the run without) up to the end, the final flush and close included (every row recorded is
@@ -108,9 +108,9 @@ class _Timed:
         self.sink.log_step(result, arrival_ns=arrival_ns)
         self.inside_s += time.thread_time() - a - self.overhead_s
 
-    def log_truth(self, target_id: str, t_ns: int, state: Any) -> None:
+    def log_truths(self, truths: Any) -> None:
         a = time.thread_time()
-        self.sink.log_truth(target_id, t_ns, state)
+        self.sink.log_truths(truths)
         self.inside_s += time.thread_time() - a - self.overhead_s
 
     def log_text(self, t_ns: int, text: str, level: str = "INFO") -> None:
@@ -130,7 +130,7 @@ class _Timed:
 
 
 class _Nothing:
-    def log_truth(self, target_id: str, t_ns: int, state: Any) -> None: ...
+    def log_truths(self, truths: Any) -> None: ...
 
 
 def timer_overhead_s(calls: int = 5000, blocks: int = 7) -> float:
@@ -142,7 +142,7 @@ def timer_overhead_s(calls: int = 5000, blocks: int = 7) -> float:
     for _ in range(blocks):
         t = _Timed(_Nothing())
         for _ in range(calls):
-            t.log_truth("", 0, None)
+            t.log_truths(())
         means.append(t.inside_s / calls)
     return min(means)
 

@@ -64,7 +64,7 @@ def capture(n_targets: int) -> tuple[list[tuple[int, Any, Any]], Any, Any, int]:
         def log_step(self, r: Any, *, arrival_ns: int | None = None) -> None:
             calls.append((0, r, arrival_ns))
 
-        def log_truth(self, *a: Any) -> None:
+        def log_truths(self, *a: Any) -> None:
             calls.append((1, a, None))
 
         def log_text(self, *a: Any) -> None:
@@ -94,7 +94,7 @@ def once(cls: type, calls: list, tr: Any, cfg: Any, flush_rows: int, d: Path) ->
         if kind == 0:
             s.log_step(r, arrival_ns=arr)
         elif kind == 1:
-            s.log_truth(*r)
+            s.log_truths(*r)
         else:
             s.log_text(*r)
     s.close()

@@ -75,7 +75,7 @@ class Codec(Protocol):
 class Sink(Protocol):
     def log_step(self, result: StepResult, *, arrival_ns: int | None = None) -> None: ...
 
-    def log_truth(self, target_id: str, t_ns: int, state: np.ndarray) -> None: ...
+    def log_truths(self, truths: Sequence[tuple[str, int, np.ndarray]]) -> None: ...
 
     def log_text(self, t_ns: int, text: str, level: str = "INFO") -> None: ...
 
@@ -109,6 +109,7 @@ class Pipeline:
         # per configured sensor, the batch's (latencies, epochs, seqs) not yet counted (_checked)
         self._pending: dict[str, tuple[list[int], list[int], list[int]]] = {}
         self._held: list[Detection] = []  # the last scan's measurements of a batch with more to come
+        self._truths: list[tuple[str, int, np.ndarray]] = []  # the batch's truth, for the sink in one call
 
     @property
     def holding(self) -> int:
@@ -156,8 +157,8 @@ class Pipeline:
                     self._refuse(Reason.KEY_MISMATCH, key, f"truth of {tr[0]!r} on another target's key", kind=kind)
                     return None
                 self._truth += 1
-                if tr is not None and self.sink is not None:
-                    self.sink.log_truth(*tr)
+                if tr is not None:
+                    self._truths.append(tr)
                 return None
             elif kind == "input":
                 c = self.codec.control(payload, arrival_ns)
@@ -247,6 +248,9 @@ class Pipeline:
                     dets.append(d)
         finally:
             self._count_pending()
+            truths, self._truths = self._truths, []
+            if truths and self.sink is not None:  # before the step, as each sample's call was
+                self.sink.log_truths(truths)
         if more:
             self._held = _last_scan(dets)
             if self._held:

@@ -54,10 +54,11 @@ class Histories:
         if self.inner is not None:
             self.inner.log_step(result, arrival_ns=arrival_ns)
 
-    def log_truth(self, target_id: str, t_ns: int, state: Array) -> None:
-        self.truth.setdefault(t_ns, {})[target_id] = np.asarray(state, dtype=np.float64)
+    def log_truths(self, truths: Sequence[tuple[str, int, Array]]) -> None:
+        for target_id, t_ns, state in truths:
+            self.truth.setdefault(t_ns, {})[target_id] = np.asarray(state, dtype=np.float64)
         if self.inner is not None:
-            self.inner.log_truth(target_id, t_ns, state)
+            self.inner.log_truths(truths)
 
     def log_text(self, t_ns: int, text: str, level: str = "INFO") -> None:
         if self.inner is not None:

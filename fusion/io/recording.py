@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import time
 import uuid
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -64,8 +64,8 @@ class RotatingSink:
         self.steps_per_file[-1] += 1
         self._maybe_rotate()
 
-    def log_truth(self, target_id: str, t_ns: int, state: Any) -> None:
-        self.sink.log_truth(target_id, t_ns, state)
+    def log_truths(self, truths: Sequence[tuple[str, int, Any]]) -> None:
+        self.sink.log_truths(truths)
 
     def log_text(self, t_ns: int, text: str, level: str = "INFO") -> None:
         self.sink.log_text(t_ns, text, level)

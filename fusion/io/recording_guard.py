@@ -10,6 +10,7 @@ tracking and publishing; its status says the recording failed and why (fusion.se
 from __future__ import annotations
 
 import logging
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -34,8 +35,8 @@ class GuardedSink:
         self.error = f"recording {self.sink.path} failed: {type(e).__name__}: {e}"
         log.error("%s; tracking and publishing go on without it", self.error)
 
-    # each call written out, not dispatched by name: log_truth comes once per target per scan,
-    # and the dispatch (a getattr, an argument tuple) made a call 0.24 us instead of 0.09
+    # each call written out, not dispatched by name: log_step comes once per batch, log_text per
+    # refusal, and the dispatch (a getattr, an argument tuple) made a call 0.24 us instead of 0.09
     def log_step(self, result: StepResult, *, arrival_ns: int | None = None) -> None:
         if self.error is None:
             try:
@@ -43,10 +44,10 @@ class GuardedSink:
             except RECORDING_ERRORS as e:
                 self._failed(e)
 
-    def log_truth(self, target_id: str, t_ns: int, state: Any) -> None:
+    def log_truths(self, truths: Sequence[tuple[str, int, Any]]) -> None:
         if self.error is None:
             try:
-                self.sink.log_truth(target_id, t_ns, state)
+                self.sink.log_truths(truths)
             except RECORDING_ERRORS as e:
                 self._failed(e)
 

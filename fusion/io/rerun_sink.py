@@ -54,7 +54,7 @@ from __future__ import annotations
 
 import time
 import uuid
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -204,12 +204,15 @@ class RerunSink:
             c = self._cols[entity] = Column(kind, **style)
         return c
 
-    def log_truth(self, target_id: str, t_ns: int, state: Array) -> None:
-        """A true state in the tracker's layout; kept to score estimates at the same t_ns (the
-        world/truth rows are built at flush, in one block)."""
-        s = self.rows.add_truth(target_id, t_ns, state)
-        self._truth_rows.append((t_ns, self._step, s, target_id))
-        self._pending += 1
+    def log_truths(self, truths: Sequence[tuple[str, int, Array]]) -> None:
+        """True states in the tracker's layout, (target_id, t_ns, state) each; kept to score
+        estimates at the same t_ns (the world/truth rows are built at flush, in one block). One
+        call for a batch's truth: a call per sample through the sink's wrappers cost ~10 % of
+        the recording at 10 targets fed fast (bench.recording_truth)."""
+        add, rows, step = self.rows.add_truth, self._truth_rows, self._step
+        for target_id, t_ns, state in truths:
+            rows.append((t_ns, step, add(target_id, t_ns, state), target_id))
+        self._pending += len(truths)
 
     def log_text(self, t_ns: int, text: str, level: str = "INFO") -> None:
         """A line for the events view, and a structured "note" event beside it."""

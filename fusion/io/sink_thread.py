@@ -1,6 +1,6 @@
 """The recording on a thread of its own: the service's loop hands each call over and goes on.
 
-Every call the pipeline and the loop make on the recording (log_step, log_truth, log_text,
+Every call the pipeline and the loop make on the recording (log_step, log_truths, log_text,
 maybe_flush, close) is queued, in order, for one writer thread that makes it on the sink
 (fusion.io.recording_guard.GuardedSink over a RerunSink or a RotatingSink): the sink sees the
 same calls in the same order as when the loop made them itself, so the file holds the same rows;
@@ -51,7 +51,7 @@ from __future__ import annotations
 import threading
 import time
 from collections import deque
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -112,8 +112,9 @@ class SinkThread:
         rows = len(result.estimates) + result.n_associations + len(result.events) + len(result.refused) + 1
         self._put(rows, self._guard.log_step, (result,), {"arrival_ns": arrival_ns})  # type: ignore[union-attr]
 
-    def log_truth(self, target_id: str, t_ns: int, state: np.ndarray) -> None:
-        self._put(1, self._guard.log_truth, (target_id, t_ns, state))  # type: ignore[union-attr]
+    def log_truths(self, truths: Sequence[tuple[str, int, np.ndarray]]) -> None:
+        """A batch's truth samples, one call queued (the caller does not change the list after)."""
+        self._put(len(truths), self._guard.log_truths, (truths,))  # type: ignore[union-attr]
 
     def log_text(self, t_ns: int, text: str, level: str = "INFO") -> None:
         self._put(1, self._guard.log_text, (t_ns, text, level))  # type: ignore[union-attr]

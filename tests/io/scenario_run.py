@@ -157,7 +157,7 @@ def record_maneuver(path, *, seed: int = 3, batch: int = 1, sink=None) -> tuple[
     results = []
     try:
         for t, x in sorted(truth.items()):
-            out.log_truth("target", t, x)
+            out.log_truths([("target", t, x)])
         for i in range(0, len(dets), batch):
             r = tr.process(dets[i:i + batch])
             results.append(r)

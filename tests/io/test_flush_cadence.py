@@ -23,7 +23,7 @@ STATE = np.array([1.0, 0.0, 2.0, 0.0])
 
 def _truths(sink, n: int, t0_ns: int) -> None:
     for k in range(n):  # one pending row each
-        sink.log_truth(f"t{k}", t0_ns, STATE)
+        sink.log_truths([(f"t{k}", t0_ns, STATE)])
 
 
 def _sink(path: Path, **kw) -> RerunSink:

@@ -18,7 +18,7 @@ def _record(path: Path, pause: object = None) -> RerunSink:
                      velocity_indices=tr.velocity_indices, flush_interval_s=1e9, view_interval_s=0.0, flush_rows=400,
                      pause=pause)  # type: ignore[arg-type]
     for t, x in sorted(truth.items()):
-        sink.log_truth("target", t, x)
+        sink.log_truths([("target", t, x)])
     for d in dets:
         sink.log_step(tr.process([d]))
     return sink

@@ -120,7 +120,7 @@ def test_inspect_cli_runs(three_runs: Path) -> None:
 class _NullSink:
     """Takes a run's steps and writes nothing (to get the results of record_maneuver's run)."""
 
-    def log_truth(self, target_id: str, t_ns: int, state: np.ndarray) -> None:
+    def log_truths(self, truths: object) -> None:
         pass
 
     def log_step(self, result: object) -> None:

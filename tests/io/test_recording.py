@@ -121,7 +121,7 @@ def test_rotation_loses_and_duplicates_nothing(tmp_path: Path) -> None:
     sink = RotatingSink(tmp_path, prefix="rot", layout=tr.layout, position_indices=tr.position_indices,
                         velocity_indices=tr.velocity_indices, rotate_bytes=150_000, rotate_s=1e9, flush_interval_s=0.0)
     for t, x in sorted(truth.items()):  # into the first file; scoring carries over to the next ones
-        sink.log_truth("target", t, x)
+        sink.log_truths([("target", t, x)])
     results = []
     for d in dets:
         r = tr.process([d])

@@ -10,7 +10,7 @@ import pytest
 
 from fusion.io.recording_guard import GuardedSink
 
-CALLS = {"log_step": ((None,), {"arrival_ns": 5}), "log_truth": (("t0", 1, [0.0]), {}),
+CALLS = {"log_step": ((None,), {"arrival_ns": 5}), "log_truths": (([("t0", 1, [0.0])],), {}),
          "log_text": ((1, "hello", "WARN"), {}), "maybe_flush": ((), {}), "close": ((), {})}
 
 

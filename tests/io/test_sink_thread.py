@@ -46,8 +46,8 @@ class FakeSink:
         time.sleep(self.delay_s)
         self._note("step", arrival_ns)
 
-    def log_truth(self, target_id: str, t_ns: int, state: Any) -> None:
-        self._note("truth", t_ns)
+    def log_truths(self, truths: Any) -> None:
+        self._note("truth", truths[0][1])
 
     def log_text(self, t_ns: int, text: str, level: str = "INFO") -> None:
         self._note("text", text)
@@ -81,7 +81,7 @@ def test_calls_are_made_in_order_and_none_is_lost_when_the_loop_waits_for_room()
     w.start(GuardedSink(fake))
     for k, r in enumerate(results):
         w.log_step(r, arrival_ns=k)
-        w.log_truth("t", k, None)
+        w.log_truths([("t", k, None)])
     w.close()
     assert [(c[0], c[1]) for c in fake.calls] == [x for k in range(40) for x in (("step", k), ("truth", k))]
     assert w.waits > 0, "the queue never filled: the test did not reach the bound"

@@ -28,7 +28,7 @@ def test_the_views_entities_wait_for_later_calls_and_close_writes_them(tmp_path:
                      velocity_indices=tr.velocity_indices, flush_interval_s=1e9, view_interval_s=0.0, view_slice=2,
                      flush_rows=400)  # a view flush every 400 rows (log_step calls maybe_flush)
     for t, x in sorted(truth.items()):
-        sink.log_truth("target", t, x)
+        sink.log_truths([("target", t, x)])
     waiting = []
     for d in dets:
         sink.log_step(tr.process([d]))
