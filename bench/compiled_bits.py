@@ -134,12 +134,22 @@ def measure(n: int = N, n_systems: int = N_SYSTEMS) -> dict[str, float]:
     return out
 
 
-def run(*, quick: bool = False) -> dict[str, float]:
-    from tests.platform_bits import PLATFORMS, fingerprint
+def _loops() -> str:
+    """Which of numpy's loops this machine runs for the float64 functions that differ (numpy's
+    public introspection: X86_V4 is its AVX-512 code) and OpenBLAS's kernels (threadpoolctl)."""
+    from numpy.lib.introspect import opt_func_info
+    from threadpoolctl import threadpool_info
 
-    fp = fingerprint()
-    print(f"compiled (numba {numba.__version__}) against numpy {np.__version__}, float64, this machine's "
-          f"platform {PLATFORMS.get(fp, 'unknown')} ({fp}); rows whose bits differ:")
+    info = opt_func_info(func_name="^(exp|log|arctan2|power)$", signature="float64")
+    loops = ", ".join(f"{name} {next(iter(sig.values()))['current']}" for name, sig in sorted(info.items()))
+    blas = sorted({f"{i.get('internal_api')} {i.get('version')} {i.get('architecture')}" for i in threadpool_info()
+                   if i.get("user_api") == "blas"})
+    return f"numpy's loops {loops}; BLAS {'; '.join(blas) or 'unknown'}"
+
+
+def run(*, quick: bool = False) -> dict[str, float]:
+    print(f"compiled (numba {numba.__version__}) against numpy {np.__version__}, float64 ({_loops()}); "
+          "rows whose bits differ:")
     got = measure()
     for name, v in got.items():
         print(f"  {name:<36} {v * 100:7.3f} %")

@@ -207,8 +207,8 @@ class RerunSink:
     def log_truths(self, truths: Sequence[tuple[str, int, Array]]) -> None:
         """True states in the tracker's layout, (target_id, t_ns, state) each; kept to score
         estimates at the same t_ns (the world/truth rows are built at flush, in one block). One
-        call for a batch's truth: a call per sample through the sink's wrappers cost ~10 % of
-        the recording at 10 targets fed fast (bench.recording_truth)."""
+        call for a batch's truth: a call per sample through the sink's wrappers was ~10 % of the
+        recording's time at 10 targets fed fast (a line profile: BENCHMARKS.md, Recording)."""
         add, rows, step = self.rows.add_truth, self._truth_rows, self._step
         for target_id, t_ns, state in truths:
             rows.append((t_ns, step, add(target_id, t_ns, state), target_id))
