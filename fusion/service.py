@@ -419,14 +419,17 @@ class Service:
         queued = arrived - sum(intake.values()) - self._processed + self.pipeline.holding  # held: not yet applied
         counts = np.bincount(self.tracker.track_set.status, minlength=len(Status)).tolist()  # not a Track per row
         by_status = {s.label: counts[s] for s in Status if counts[s]}
+        by_class = dict(self._q.refused_by_source)  # "<class>:<reason>" (fusion.io.intake_queue.source_class)
+        inputs_q = sum(n for k, n in by_class.items() if k.startswith("input/"))
+        truth_q = sum(n for k, n in by_class.items() if k.startswith("truth:"))
         return {
             "uptime_s": (time.time_ns() - self._started_ns) / 1e9,
             "counts": {
                 "received": arrived, "applied": c.applied, "duplicates": c.duplicates,
                 "refused": refused, "queued": queued, "replays": c.replays,
                 "late_applied": c.late_applied, "published": self.published,
-                "truth": c.truth, "inputs": c.inputs, "inputs_refused": c.inputs_refused,
-                "truth_refused": c.truth_refused,
+                "truth": c.truth, "inputs": c.inputs, "inputs_refused": c.inputs_refused + inputs_q,
+                "truth_refused": c.truth_refused + truth_q,
             },
             "tracks": dict(sorted(by_status.items())),
             "latency": self.pipeline.latency.stats(),

@@ -13,6 +13,7 @@ from typing import Any
 import msgspec
 
 from fusion import messages as m
+from fusion.cli.report import counts_line
 from fusion.config import IntakeConfig, ServiceConfig
 from tests.service.harness import EstimateCollector, client, scenario_config
 from tests.service.reliability_helpers import publisher, service_thread, settled_status, wait_offered
@@ -74,6 +75,10 @@ def test_byte_limit_and_bounds_cover_every_key(tmp_path: Path) -> None:
     assert c.refused["overload"] == 1300 - 50
     # what was queued was handled, half each (fair shares): truth recorded, wildcard puts refused
     assert c.truth == 25 and c.refused["key_mismatch"] == 25
+    # the truth refused at the queue (1 too large, 975 over its share) is said as truth, not as measurements
+    assert c.truth_refused == 976 and c.inputs_refused == 0
+    assert counts_line(msgspec.to_builtins(c)).startswith("received 301 measurements: 0 applied, 0 duplicates dropped, "
+                                                          "1277 refused")
 
 
 def test_a_queue_bounded_in_bytes(tmp_path: Path) -> None:
