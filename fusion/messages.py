@@ -213,8 +213,8 @@ class Counts(Base, kw_only=True):
     """received = applied + inputs + truth + duplicates + sum(refused.values()) + queued (inputs:
     control inputs applied; 0 from a service before they were counted here). Of the duplicates
     and refused, inputs_refused were control inputs and truth_refused truth samples (0 from a
-    service before they were counted); the rest measurements, or samples whose kind is not known
-    (on a key of no configured source, or dropped at shutdown)."""
+    service before they were counted); the rest measurements, or samples whose key names no kind
+    (fusion/NS/meas|input|truth/ID) or that were dropped at shutdown."""
 
     received: int
     applied: int

@@ -419,9 +419,8 @@ class Service:
         queued = arrived - sum(intake.values()) - self._processed + self.pipeline.holding  # held: not yet applied
         counts = np.bincount(self.tracker.track_set.status, minlength=len(Status)).tolist()  # not a Track per row
         by_status = {s.label: counts[s] for s in Status if counts[s]}
-        by_class = dict(self._q.refused_by_source)  # "<class>:<reason>" (fusion.io.intake_queue.source_class)
-        inputs_q = sum(n for k, n in by_class.items() if k.startswith("input/"))
-        truth_q = sum(n for k, n in by_class.items() if k.startswith("truth:"))
+        kinds = dict(self._q.refused_kinds)  # the intake queue's refusals by their keys' kind
+        inputs_q, truth_q = kinds.get("input", 0), kinds.get("truth", 0)
         return {
             "uptime_s": (time.time_ns() - self._started_ns) / 1e9,
             "counts": {

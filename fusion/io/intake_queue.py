@@ -23,8 +23,9 @@ configured source is its own class ("meas/cam1"); every truth key shares "truth"
 key (unknown sensors, wildcard puts) shares "other". Memory per sample is counted as payload +
 key + RECORD_OVERHEAD_BYTES (the Python objects around them).
 
-Counts (`refused`, by reason, and `refused_by_source`) are what was offered and never handed
-out: offered = handed out + sum(refused) + len(queue). One lock guards everything: `offer`
+Counts (`refused`, by reason, `refused_by_source`, and `refused_kinds`: by the kind its key
+names, "meas", "input", "truth" or "other", whatever its class) are what was offered and never
+handed out: offered = handed out + sum(refused) + len(queue). One lock guards everything: `offer`
 runs on Zenoh's threads, `drain` on the tracker's.
 """
 
@@ -77,6 +78,12 @@ def source_class(key: str, known: frozenset[str]) -> str:
     return "other"
 
 
+def key_kind(key: str) -> str:
+    """The kind a key expression fusion/NS/KIND/ID names: "meas", "input" or "truth", else "other"."""
+    parts = key.split("/")
+    return parts[2] if len(parts) == 4 and parts[2] in ("meas", "input", "truth") else "other"
+
+
 class IntakeQueue:
     """See the module docstring. `known`: the configured sensor and control-source ids."""
 
@@ -97,6 +104,7 @@ class IntakeQueue:
         self.handed_out = 0
         self.refused: Counter[str] = Counter()
         self.refused_by_source: Counter[str] = Counter()
+        self.refused_kinds: Counter[str] = Counter()
         self.max_depth = 0
         self.max_bytes = 0
 
@@ -115,9 +123,10 @@ class IntakeQueue:
         with self._lock:
             return {c: len(q) for c, q in sorted(self._queues.items()) if q}
 
-    def _refuse(self, cls: str, reason: str, n: int = 1) -> None:
-        self.refused[reason] += n
-        self.refused_by_source[f"{cls}:{reason}"] += n
+    def _refuse(self, cls: str, reason: str, key: str) -> None:
+        self.refused[reason] += 1
+        self.refused_by_source[f"{cls}:{reason}"] += 1
+        self.refused_kinds[key_kind(key)] += 1
 
     def _rate_ok(self, cls: str) -> bool:
         rate, burst = self.limits.rate_hz, float(self.limits.burst)
@@ -174,12 +183,12 @@ class IntakeQueue:
                         if victim is None or victim == cls or len(queues[victim]) <= len(queues.get(cls, ())):
                             reason = OVERLOAD
                             break
-                        _, _, vcost = queues[victim].popleft()
+                        _, vrec, vcost = queues[victim].popleft()
                         self._len -= 1
                         self._bytes -= vcost
-                        self._refuse(victim, OVERLOAD)
+                        self._refuse(victim, OVERLOAD, vrec[1])
                 if reason is not None:
-                    self._refuse(cls, reason)
+                    self._refuse(cls, reason, key)
                     if refusals is not None:
                         refusals.append((i, reason))
                     continue

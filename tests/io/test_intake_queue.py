@@ -34,6 +34,19 @@ def test_source_classes_are_bounded_in_number(k: str, cls: str) -> None:
     assert source_class(k, frozenset(KNOWN)) == cls
 
 
+def test_refusals_are_counted_by_the_kind_their_key_names() -> None:
+    """Whatever the class: an input of an unconfigured source shares "other" with unknown sensors,
+    yet is counted as an input; a sample evicted to make room is counted by its own key."""
+    q = IntakeQueue(IntakeLimits(queue_max=1, queue_max_bytes=10**6, max_message_bytes=100), known=KNOWN)
+    big = b"z" * 101
+    for k in (key("input", "wheel"), key("truth", "x"), key("meas", "ghost"), "fusion/demo/**"):
+        assert offer(q, 1, k, big) == "too_large"
+    assert offer(q, 2, key("truth", "x")) is None
+    assert offer(q, 3, key("meas", "cam1")) is None  # the queue is full: truth, the bigger class, makes room
+    assert q.refused == {"too_large": 4, "overload": 1} and adds_up(q)
+    assert q.refused_kinds == {"input": 1, "truth": 2, "meas": 1, "other": 1}
+
+
 def test_a_payload_over_the_byte_limit_is_refused_without_being_copied() -> None:
     q = IntakeQueue(IntakeLimits(queue_max=10, queue_max_bytes=10**6, max_message_bytes=100), known=KNOWN)
 
