@@ -70,11 +70,11 @@ class IntakeLimits:
 
 def source_class(key: str, known: frozenset[str]) -> str:
     """The fairness class of a key expression fusion/NS/KIND/ID (see the module docstring)."""
-    parts = key.split("/")
-    if len(parts) == 4 and parts[2] in ("meas", "input") and parts[3] in known:
-        return f"{parts[2]}/{parts[3]}"
-    if len(parts) == 4 and parts[2] == "truth":
+    kind = key_kind(key)
+    if kind == "truth":
         return "truth"
+    if kind != "other" and (ident := key.rsplit("/", 1)[1]) in known:
+        return f"{kind}/{ident}"
     return "other"
 
 
