@@ -25,7 +25,7 @@ from scipy.stats import chi2
 
 from fusion.core.checks import Array
 from fusion.core.metrics import ospa_gospa
-from fusion.io.columns import stack
+from fusion.io.truth_table import TruthTable
 from fusion.io.view_kernels import ellipse_outline
 
 MATCH_D2 = 100.0
@@ -108,11 +108,12 @@ def quaternions(R: Array) -> Array:
     return q
 
 
-def match_truth(t_ns: Array, X: Array, P: Array, truth: dict[int, dict[str, Array]], pi: list[int]
+def match_truth(t_ns: Array, X: Array, P: Array, truth: TruthTable, pi: list[int]
                 ) -> tuple[Array, Array, list[str]]:
     """(row indices, true states (k, d), target ids) of the estimates matched to a truth target.
 
-    The true targets at each estimate's time, in the order of their ids, are its candidates; the
+    The true targets at each estimate's time, in the order of their ids (a time's block of
+    `truth`), are its candidates; the
     nearest in position is found for every estimate at once where a time has at most 16 (the
     distances to all candidates, padded), by a k-d tree per time where it has more; one batched
     solve gives every squared Mahalanobis distance (in closed form for 2-D positions, P's (0, 1)
@@ -121,22 +122,22 @@ def match_truth(t_ns: Array, X: Array, P: Array, truth: dict[int, dict[str, Arra
     times, inverse = np.unique(t_ns, return_inverse=True)
     start = np.zeros(len(times), dtype=np.int64)
     count = np.zeros(len(times), dtype=np.int64)
-    states: list[Array] = []
+    blocks: list[Array] = []
     names: list[str] = []
+    n_c = 0
+    at = truth.at
     for u, tt in enumerate(times.tolist()):
-        T = truth.get(tt)
-        if not T:
+        T = at(tt)
+        if T is None or T.S.shape[1] != d:  # none, or a truth in another layout: nothing to match
             continue
-        ids = sorted(T)
-        if len(T[ids[0]]) != d:  # a truth in another layout: nothing to match
-            continue
-        start[u], count[u] = len(names), len(ids)
-        states.extend([T[k] for k in ids])
-        names.extend(ids)
+        start[u], count[u] = n_c, len(T.ids)
+        n_c += len(T.ids)
+        blocks.append(T.S)
+        names.extend(T.ids)
     rows = np.flatnonzero(count[inverse] > 0)
     if not rows.size:
         return np.empty(0, dtype=np.int64), np.empty((0, d)), []
-    C_all = stack(states)  # every time's candidates, one block (float64, as Rows.add_truth keeps them)
+    C_all = np.concatenate(blocks)  # every time's candidates, one block (float64)
     Cp = C_all[:, pi]
     u_r, Xp = inverse[rows], X[rows][:, pi]
     best = np.empty(len(rows), dtype=np.int64)

@@ -131,7 +131,7 @@ class RerunSink:
         self._est_steps: list[tuple[tuple[Estimate, ...], int, int | None]] = []  # (estimates, step, arrival)
         self._steps: list[tuple[tuple, tuple, int, int | None]] = []  # (measurements, associations, step, arrival)
         self.flushes = 0  # flushes so far (fusion.io.recording looks at the file's size after each)
-        self._truth_rows: list[tuple[int, int, Array, str]] = []
+        self._truth_rows: list[tuple[list[int], int, Array, list[str]]] = []  # per log_truths: (t_ns, step, S, targets)
         self._scored: list[Any] = []  # the viewed tracks' rows (fusion.io.view_rows.Stacked) since the last view flush
         self._pending = 0
         self._flush_rows = flush_rows
@@ -206,13 +206,17 @@ class RerunSink:
 
     def log_truths(self, truths: Sequence[tuple[str, int, Array]]) -> None:
         """True states in the tracker's layout, (target_id, t_ns, state) each; kept to score
-        estimates at the same t_ns (the world/truth rows are built at flush, in one block). One
-        call for a batch's truth: a call per sample through the sink's wrappers was ~10 % of the
-        recording's time at 10 targets fed fast (a line profile: BENCHMARKS.md, Recording)."""
-        add, rows, step = self.rows.add_truth, self._truth_rows, self._step
-        for target_id, t_ns, state in truths:
-            rows.append((t_ns, step, add(target_id, t_ns, state), target_id))
-        self._pending += len(truths)
+        estimates at the same t_ns (fusion.io.truth_table), and as one block of rows for the
+        record/truth and world/truth rows written at the next flush. One call for a batch's truth:
+        a call per sample through the sink's wrappers was ~10 % of the recording's time at 10
+        targets fed fast (a line profile: BENCHMARKS.md, Recording)."""
+        if not truths:
+            return
+        targets, t_ns, states = (list(c) for c in zip(*truths, strict=True))  # one pass
+        S = stack(states)  # float64: the states as logged
+        self.rows.add_truths(targets, t_ns, S)
+        self._truth_rows.append((t_ns, self._step, S, targets))
+        self._pending += len(targets)
 
     def log_text(self, t_ns: int, text: str, level: str = "INFO") -> None:
         """A line for the events view, and a structured "note" event beside it."""
@@ -338,8 +342,10 @@ class RerunSink:
                 t_est, arr_e, stp_e = t_est[~wait], arr_e[~wait], stp_e[~wait]
         truth, self._truth_rows = self._truth_rows, []
         if truth:
-            t_t, step_t, states, targets = (list(c) for c in zip(*truth, strict=True))  # one pass
-            S = stack(states)  # the states as logged: float64 (Rows.add_truth)
+            t_t = [t for b in truth for t in b[0]]
+            step_t = [b[1] for b in truth for _ in b[0]]
+            S = np.concatenate([b[2] for b in truth])  # the states as logged: float64
+            targets = [x for b in truth for x in b[3]]
             self.col("record/truth", "record").extend(t_t, step_t, t_t, blocks={"x": S},
                                                       target=targets)  # float64: for inspect
             W = world(S[:, self.rows.pi])

@@ -7,7 +7,6 @@ per view flush, however many record flushes came before it."""
 
 from __future__ import annotations
 
-from collections import defaultdict
 from collections.abc import Callable
 from itertools import repeat
 from operator import eq
@@ -19,6 +18,7 @@ from fusion.core.checks import Array
 from fusion.io import derive, gain_groups, trail
 from fusion.io.labels import short_id
 from fusion.io.palette import colour, series_colours
+from fusion.io.truth_table import TruthTable
 from fusion.io.view_rows import EstimateColumns, ReviewBlocks, Stacked
 from fusion.io.viewed import ViewedTracks
 from fusion.tracking.results import Estimate
@@ -44,7 +44,7 @@ class Rows:
         self.pi = pi
         self.ki = sorted(set(pi) | set(vi))  # kinematic components: what NEES is computed over
         self.axes = [layout[i] for i in pi]
-        self.truth: dict[int, dict[str, Array]] = defaultdict(dict)
+        self.truth = TruthTable(TRUTH_KEPT)
         self.choice = ViewedTracks(MAX_VIEWED)
         self._held: list[Stacked] = []  # the candidates' rows, until the choice is settled
         self._last: dict[int, tuple[int, int, int, Array]] = {}  # viewed track -> newest (t, step, arrival, world)
@@ -52,16 +52,18 @@ class Rows:
         self._lo = np.full(3, np.inf)
         self._hi = np.full(3, -np.inf)
         self._next_ospa = -(2**62)
-        self.newest_truth_ns: int | None = None
+
+    @property
+    def newest_truth_ns(self) -> int | None:
+        return self.truth.newest_ns
 
     def continue_from(self, other: Rows) -> None:
-        self.truth.update(other.truth)
+        self.truth.continue_from(other.truth)
         self.choice.continue_from(other.choice)
         self._held = list(other._held)
         self._last = dict(other._last)
         self._trail = dict(other._trail)
         self._lo, self._hi, self._next_ospa = other._lo.copy(), other._hi.copy(), other._next_ospa
-        self.newest_truth_ns = other.newest_truth_ns
 
     @property
     def viewed(self) -> dict[int, str]:
@@ -77,24 +79,17 @@ class Rows:
             return [0.0, 0.0, 0.0], 10.0
         return list((self._lo + self._hi) / 2), float(max(np.max(self._hi - self._lo) / 2, 1.0))
 
-    def add_truth(self, target_id: str, t_ns: int, state: Array) -> Array:
-        s = np.asarray(state, dtype=np.float64)
-        self.truth[t_ns][target_id] = s
-        if self.newest_truth_ns is None or t_ns > self.newest_truth_ns:
-            self.newest_truth_ns = t_ns
-        if len(self.truth) > TRUTH_KEPT:
-            for k in sorted(self.truth)[: TRUTH_KEPT // 2]:
-                del self.truth[k]
-        return s
+    def add_truths(self, target_ids: list[str], t_ns: list[int], S: Array) -> None:
+        """True states in the tracker's layout: target_ids[i] at t_ns[i] in S[i] ((n, d)
+        float64), kept to score estimates at the same times (fusion.io.truth_table)."""
+        self.truth.add(target_ids, t_ns, S)
 
     def forget_truth_before(self, t_ns: int) -> None:
         """Drop the truth of times before t_ns: no estimate to score is before it any more (the
         sink passes the tracker's horizon, or the oldest estimate still waiting if older). Kept
         until TRUTH_KEPT times, truth at 667 targets and 10 Hz held ~1.1 MB more every second
         (~170 bytes a sample), 11 GB before the first drop."""
-        old = [k for k in self.truth if k < t_ns]
-        for k in old:
-            del self.truth[k]
+        self.truth.forget_before(t_ns)
 
     # ---- one flush -------------------------------------------------------------------------------
     def score(self, E: list[Estimate], t: Array, arr: Array, step: Array, sink: Any, *,
@@ -198,14 +193,14 @@ class Rows:
                        ids: list[int]) -> None:
         """OSPA and GOSPA at the first scan time with truth in each OSPA_EVERY_NS."""
         for tt in sorted(set(t[conf].tolist())):
-            if tt < self._next_ospa or not self.truth.get(tt) or len(self.truth[tt]) > OSPA_MAX_POINTS:
+            T = self.truth.at(tt)
+            if tt < self._next_ospa or T is None or len(T.ids) > OSPA_MAX_POINTS:
                 continue
             self._next_ospa = tt + OSPA_EVERY_NS
             at = np.flatnonzero(conf & (t == tt))
             last = {ids[i]: i for i in at.tolist()}  # the newest row of each track at that time
             pts = W[sorted(last.values())][:, : len(self.pi)]
-            T = self.truth[tt]
-            truth_pts = np.stack([T[k][self.pi] for k in sorted(T)])
+            truth_pts = T.S[:, self.pi]  # in the order of the targets' ids
             o, g = derive.set_distances(pts, truth_pts)
             i0 = int(at[0])
             for name, v in (("ospa", o), ("gospa", g)):

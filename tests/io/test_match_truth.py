@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from fusion.io.derive import MATCH_D2, match_truth
+from fusion.io.truth_table import TruthTable
 
 PI = [0, 2]
 
@@ -43,7 +44,10 @@ def test_match_truth_is_the_nearest_within_the_gate(n_targets: int) -> None:
     t = np.array([rows[i][0] for i in order], dtype=np.int64)
     X = np.array([rows[i][1] for i in order])
     P = np.stack([np.diag(rng.uniform(1.0, 30.0, 4)) for _ in order])
-    idx, states, names = match_truth(t, X, P, truth, PI)
+    table = TruthTable()
+    samples = [(k, tt, s) for tt, T in truth.items() for k, s in reversed(T.items())]  # ids out of order
+    table.add([k for k, _, _ in samples], [tt for _, tt, _ in samples], np.stack([s for _, _, s in samples]))
+    idx, states, names = match_truth(t, X, P, table, PI)
     r_idx, r_states, r_names = _reference(t, X, P, truth)
     assert idx.tolist() == r_idx, f"seed {20 + n_targets}"
     assert names == r_names

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from fusion.io.track_rows import Rows
@@ -25,17 +26,17 @@ def test_truth_before_the_horizon_is_dropped_and_changes_nothing(tmp_path: Path,
                                                                  monkeypatch: pytest.MonkeyPatch) -> None:
     kept: list[int] = []
     logged: set[int] = set()
-    add, forget = Rows.add_truth, Rows.forget_truth_before
+    add, forget = Rows.add_truths, Rows.forget_truth_before
 
-    def adding(self: Rows, target_id: str, t_ns: int, state: object) -> object:
-        logged.add(t_ns)
-        return add(self, target_id, t_ns, state)
+    def adding(self: Rows, target_ids: list[str], t_ns: list[int], S: np.ndarray) -> None:
+        logged.update(t_ns)
+        add(self, target_ids, t_ns, S)
 
     def forgetting(self: Rows, t_ns: int) -> None:
         forget(self, t_ns)
         kept.append(len(self.truth))
 
-    monkeypatch.setattr(Rows, "add_truth", adding)
+    monkeypatch.setattr(Rows, "add_truths", adding)
     monkeypatch.setattr(Rows, "forget_truth_before", forgetting)
     _record(tmp_path / "dropped.rrd")
     assert len(kept) >= 20, "too few flushes with a horizon: no test"
