@@ -7,6 +7,7 @@ per view flush, however many record flushes came before it."""
 
 from __future__ import annotations
 
+from bisect import bisect_left
 from collections.abc import Callable
 from itertools import repeat
 from operator import eq
@@ -192,11 +193,16 @@ class Rows:
     def _set_distances(self, sink: Any, t: Array, step: Array, arr: Array, W: Array, conf: Array,
                        ids: list[int]) -> None:
         """OSPA and GOSPA at the first scan time with truth in each OSPA_EVERY_NS."""
-        for tt in sorted(set(t[conf].tolist())):
+        times = np.unique(t[conf]).tolist()
+        k = bisect_left(times, self._next_ospa)
+        while k < len(times):
+            tt = times[k]
+            k += 1
             T = self.truth.at(tt)
-            if tt < self._next_ospa or T is None or len(T.ids) > OSPA_MAX_POINTS:
+            if T is None or len(T.ids) > OSPA_MAX_POINTS:
                 continue
             self._next_ospa = tt + OSPA_EVERY_NS
+            k = bisect_left(times, self._next_ospa, k)
             at = np.flatnonzero(conf & (t == tt))
             last = {ids[i]: i for i in at.tolist()}  # the newest row of each track at that time
             pts = W[sorted(last.values())][:, : len(self.pi)]
