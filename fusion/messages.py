@@ -212,9 +212,10 @@ class LatencyStats(Base, kw_only=True):
 class Counts(Base, kw_only=True):
     """received = applied + inputs + truth + duplicates + sum(refused.values()) + queued (inputs:
     control inputs applied; 0 from a service before they were counted here). Of the duplicates
-    and refused, inputs_refused were control inputs and truth_refused truth samples (0 from a
-    service before they were counted); the rest measurements, or samples whose key names no kind
-    (fusion/NS/meas|input|truth/ID) or that were dropped at shutdown."""
+    and refused, inputs_refused were control inputs, truth_refused truth samples and
+    other_refused samples on a key that names no kind (not fusion/NS/meas|input|truth/ID), at the
+    pipeline, the intake queue or dropped at shutdown (0 from a service before they were
+    counted); the rest measurements."""
 
     received: int
     applied: int
@@ -228,6 +229,7 @@ class Counts(Base, kw_only=True):
     inputs: int = 0
     inputs_refused: int = 0
     truth_refused: int = 0
+    other_refused: int = 0
 
 
 class SeqGapStats(Base, kw_only=True):

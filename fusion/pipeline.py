@@ -104,7 +104,7 @@ class Pipeline:
         self._received = 0
         self._truth = 0
         self._refused: dict[Reason, int] = {}  # at the edge, before the tracker
-        self._refused_kinds = {"input": 0, "truth": 0}  # of them, on input and truth keys
+        self._refused_kinds = {"input": 0, "truth": 0, "other": 0}  # of them, by their keys' kind (not measurements)
         self._routes: dict[str, tuple[str, str]] = {}  # key expression -> (kind, key id)
         # per configured sensor, the batch's (latencies, epochs, seqs) not yet counted (_checked)
         self._pending: dict[str, tuple[list[int], list[int], list[int]]] = {}
@@ -124,7 +124,8 @@ class Pipeline:
             refused[r] = refused.get(r, 0) + n
         return dataclasses.replace(c, received=self._received - len(self._held), truth=self._truth,
                                    inputs_refused=c.inputs_refused + self._refused_kinds["input"],
-                                   truth_refused=self._refused_kinds["truth"], refused=dict(sorted(refused.items())))
+                                   truth_refused=self._refused_kinds["truth"],
+                                   other_refused=self._refused_kinds["other"], refused=dict(sorted(refused.items())))
 
     def _refuse(self, reason: Reason, key: str, detail: str, t_ns: int = 0, kind: str = "meas") -> None:
         """Count and say a sample refused at the edge; `kind` its key's (fusion.io.wire.Codec.kind)."""
@@ -168,7 +169,7 @@ class Pipeline:
                     return None
                 return c
             else:
-                self._refuse(Reason.INVALID, key, "not a measurement, input or truth key")
+                self._refuse(Reason.INVALID, key, "not a measurement, input or truth key", kind="other")
                 return None
         except MalformedMessageError as e:
             self._refuse(Reason.MALFORMED, key, str(e), kind=kind)

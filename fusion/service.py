@@ -29,6 +29,7 @@ import dataclasses
 import logging
 import threading
 import time
+from collections import Counter
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -43,7 +44,7 @@ from fusion.io.burst import Drained, drain_burst
 from fusion.io.channel_intake import ChannelIntake, Taken
 from fusion.io.checkpointer import Checkpointer, counts_since, service_checkpoint_path
 from fusion.io.gain_groups import measured_components
-from fusion.io.intake_queue import IntakeLimits, IntakeQueue
+from fusion.io.intake_queue import IntakeLimits, IntakeQueue, key_kind
 from fusion.io.outputs import Outputs, open_outputs
 from fusion.io.recording import RotatingSink
 from fusion.io.recording_guard import GuardedSink
@@ -98,6 +99,7 @@ class Service:
                                            max_message_bytes=ic.max_message_bytes, rate_hz=ic.source_rate_hz,
                                            burst=ic.source_burst), known=known)
         self._shutdown_dropped = 0
+        self._shutdown_kinds: Counter[str] = Counter()  # of them, by their keys' kind (intake_queue.key_kind)
         self._wake = threading.Event()
         self._channels: ChannelIntake | None = None  # the subscribers' channels, once open()
         self._stop = threading.Event()
@@ -369,6 +371,7 @@ class Service:
         left = self._drain(len(self._q)) if self._q else []
         if left:
             self._shutdown_dropped += len(left)
+            self._shutdown_kinds.update(key_kind(key) for _, key, _ in left)
             log.warning("shutdown: drain deadline of %.1f s reached, %d queued samples dropped (counted as "
                         "'shutdown')", self.config.intake.drain_deadline_s, len(left))
             if self._recording is not None:  # a row to flush, so that the final counts reach the recording
@@ -419,16 +422,15 @@ class Service:
         queued = arrived - sum(intake.values()) - self._processed + self.pipeline.holding  # held: not yet applied
         counts = np.bincount(self.tracker.track_set.status, minlength=len(Status)).tolist()  # not a Track per row
         by_status = {s.label: counts[s] for s in Status if counts[s]}
-        kinds = dict(self._q.refused_kinds)  # the intake queue's refusals by their keys' kind
-        inputs_q, truth_q = kinds.get("input", 0), kinds.get("truth", 0)
+        kinds = self._q.refused_kinds + self._shutdown_kinds  # refused before decoding, by their keys' kind
         return {
             "uptime_s": (time.time_ns() - self._started_ns) / 1e9,
             "counts": {
                 "received": arrived, "applied": c.applied, "duplicates": c.duplicates,
                 "refused": refused, "queued": queued, "replays": c.replays,
                 "late_applied": c.late_applied, "published": self.published,
-                "truth": c.truth, "inputs": c.inputs, "inputs_refused": c.inputs_refused + inputs_q,
-                "truth_refused": c.truth_refused + truth_q,
+                "truth": c.truth, "inputs": c.inputs, "inputs_refused": c.inputs_refused + kinds["input"],
+                "truth_refused": c.truth_refused + kinds["truth"], "other_refused": c.other_refused + kinds["other"],
             },
             "tracks": dict(sorted(by_status.items())),
             "latency": self.pipeline.latency.stats(),

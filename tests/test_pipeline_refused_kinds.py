@@ -1,8 +1,9 @@
-"""Refused samples are counted by kind: a control input or a truth sample refused (by the tracker
-or at the edge, for any reason, duplicates included) is counted as one (Counts.inputs_refused,
-truth_refused), so the words say how many measurements were received, not measurements plus
-refused inputs (a cv1d_d stream replayed with a configuration without its control source read
-"received 200 measurements" for 100 measurements and 100 inputs)."""
+"""Refused samples are counted by kind: a control input, a truth sample or a sample on a key that
+names no kind refused (by the tracker or at the edge, for any reason, duplicates included) is
+counted as one (Counts.inputs_refused, truth_refused, other_refused), so the words say how many
+measurements were received, not measurements plus refused inputs (a cv1d_d stream replayed with a
+configuration without its control source read "received 200 measurements" for 100 measurements
+and 100 inputs)."""
 
 from __future__ import annotations
 
@@ -41,7 +42,7 @@ def test_refused_inputs_and_truth_are_counted_by_kind() -> None:
     pipe.ingest(records)
     c = pipe.counts()
     assert (c.applied, c.inputs, c.truth, c.inputs_refused, c.truth_refused) == (100, 100, 100, 0, 0)
-    assert "inputs_refused" not in c.flat() and "truth_refused" not in c.flat()  # like refused/<reason>: once any
+    assert not {"inputs_refused", "truth_refused", "other_refused"} & c.flat().keys()  # like refused/<reason>: once any
 
     last = records[-1][0]
     an_input = next(r for r in records if "/input/" in r[1])
@@ -54,17 +55,19 @@ def test_refused_inputs_and_truth_are_counted_by_kind() -> None:
         (last + 3, m.input_key(NS, "other"), an_input[2]),  # an input of "control" on other's key (the edge)
         (last + 4, m.truth_key(NS, truth_of + "x"), a_truth[2]),  # truth on another target's key (the edge)
         (last + 5, a_meas[1], b"\x00"),  # not a measurement, on a measurement key
+        (last + 6, f"fusion/{NS}/weather/w1", a_meas[2]),  # a key of no kind (a wildcard put's, say)
     ]
     pipe.ingest(bad)
     d = pipe.counts()
     _adds_up(d)
-    assert (d.received - c.received, d.applied, d.inputs, d.truth) == (5, 100, 100, 100)
-    assert (d.inputs_refused, d.truth_refused) == (3, 1), d
-    assert d.refused == {Reason.INVALID: 2, Reason.KEY_MISMATCH: 2, Reason.TOO_LATE: 1}
+    assert (d.received - c.received, d.applied, d.inputs, d.truth) == (6, 100, 100, 100)
+    assert (d.inputs_refused, d.truth_refused, d.other_refused) == (3, 1, 1), d
+    assert d.refused == {Reason.INVALID: 3, Reason.KEY_MISMATCH: 2, Reason.TOO_LATE: 1}
     assert counts_line(flat_counts(d, published=0)).startswith(
-        "received 101 measurements and 103 control inputs: 100 applied, 0 duplicates dropped, 5 refused "
-        "(invalid 2, key_mismatch 2, too_late 1); of the duplicates and refused: control inputs 3, truth samples 1")
-    assert d.flat()["inputs_refused"] == 3 and d.flat()["truth_refused"] == 1
+        "received 101 measurements and 103 control inputs: 100 applied, 0 duplicates dropped, 6 refused "
+        "(invalid 3, key_mismatch 2, too_late 1); of the duplicates and refused: control inputs 3, truth samples 1, "
+        "samples on keys of no kind 1")
+    assert (d.flat()["inputs_refused"], d.flat()["truth_refused"], d.flat()["other_refused"]) == (3, 1, 1)
 
 
 def test_inputs_of_an_unconfigured_source_are_not_said_to_be_measurements() -> None:
@@ -87,7 +90,8 @@ def test_a_status_from_before_the_kinds_were_counted_reads_as_before() -> None:
     """A status message without the new fields (a service of before) decodes with 0 for them."""
     st = m.Counts(received=3, applied=1, duplicates=1, refused={"invalid": 1}, queued=0, replays=0, late_applied=0,
                   published=1, truth=0)
-    old = {k: v for k, v in msgspec.to_builtins(st).items() if k not in ("inputs_refused", "truth_refused")}
+    new = ("inputs_refused", "truth_refused", "other_refused")
+    old = {k: v for k, v in msgspec.to_builtins(st).items() if k not in new}
     back = msgspec.convert(old, m.Counts)
-    assert (back.inputs_refused, back.truth_refused) == (0, 0)
-    assert dataclasses.asdict(Counts()).keys() >= {"inputs_refused", "truth_refused"}
+    assert (back.inputs_refused, back.truth_refused, back.other_refused) == (0, 0, 0)
+    assert dataclasses.asdict(Counts()).keys() >= set(new)

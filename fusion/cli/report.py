@@ -17,13 +17,14 @@ from fusion.tracking.results import Counts
 def counts_line(c: Mapping[str, Any]) -> str:
     """received = applied + inputs + truth + duplicates + refused + queued, said for measurements
     (the truth samples a simulator sends beside them are not measurements; control inputs are
-    said apart, applied or not: inputs + inputs_refused; truth_refused: truth samples among the
-    refused)."""
+    said apart, applied or not: inputs + inputs_refused; truth_refused and other_refused: truth
+    samples and samples on keys that name no kind among the refused)."""
     refused: Mapping[str, int] = c.get("refused", {})
     n_ref = sum(refused.values())
     inputs_refused, truth_refused = int(c.get("inputs_refused", 0)), int(c.get("truth_refused", 0))
     inputs = int(c.get("inputs", 0)) + inputs_refused
-    measurements = c["received"] - int(c.get("truth", 0)) - truth_refused - inputs
+    other_refused = int(c.get("other_refused", 0))
+    measurements = c["received"] - int(c.get("truth", 0)) - truth_refused - other_refused - inputs
     parts = [f"{c['applied']} applied", f"{c['duplicates']} duplicates dropped",
              f"{n_ref} refused" + (" (" + ", ".join(f"{k} {v}" for k, v in sorted(refused.items())) + ")"
                                    if refused else "")]
@@ -31,7 +32,8 @@ def counts_line(c: Mapping[str, Any]) -> str:
         parts.append(f"{c['queued']} not yet processed")
     line = (f"received {measurements} measurements" + (f" and {inputs} control inputs" if inputs else "") + ": "
             + ", ".join(parts))
-    others = [f"{word} {n}" for n, word in ((inputs_refused, "control inputs"), (truth_refused, "truth samples")) if n]
+    others = [f"{word} {n}" for n, word in ((inputs_refused, "control inputs"), (truth_refused, "truth samples"),
+                                            (other_refused, "samples on keys of no kind")) if n]
     if others:
         line += "; of the duplicates and refused: " + ", ".join(others)
     if c.get("late_applied"):
@@ -45,7 +47,8 @@ def flat_counts(c: Counts, *, published: int) -> dict[str, Any]:
     refused = {r.value: n for r, n in sorted(c.refused.items()) if n and r != Reason.DUPLICATE}
     return {"received": c.received, "applied": c.applied, "duplicates": c.duplicates, "refused": refused,
             "truth": c.truth, "inputs": c.inputs, "inputs_refused": c.inputs_refused, "truth_refused": c.truth_refused,
-            "late_applied": c.late_applied, "replays": c.replays, "published": published}
+            "other_refused": c.other_refused, "late_applied": c.late_applied, "replays": c.replays,
+            "published": published}
 
 
 def size(n_bytes: int) -> str:
@@ -66,7 +69,7 @@ def format_status(st: m.ServiceStatus, namespace: str) -> str:
     counts = {"received": c.received, "applied": c.applied, "duplicates": c.duplicates, "refused": c.refused,
               "queued": c.queued, "late_applied": c.late_applied, "replays": c.replays, "published": c.published,
               "truth": c.truth, "inputs": c.inputs, "inputs_refused": c.inputs_refused,
-              "truth_refused": c.truth_refused}
+              "truth_refused": c.truth_refused, "other_refused": c.other_refused}
     lines = [
         f"fusion service on namespace {namespace!r}, up {duration(st.uptime_s)}",
         f"  samples    {counts_line(counts)}",

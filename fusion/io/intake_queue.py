@@ -37,6 +37,8 @@ from collections import Counter, deque
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 
+from fusion import messages as m
+
 Record = tuple[int, str, bytes]
 Offer = tuple[int, str, int, Callable[[], bytes]]  # (arrival_ns, key, size, payload_fn): a sample offered
 # the Python objects of one queued sample beyond its payload's and key's bytes: the queue's tuple (offer
@@ -79,9 +81,13 @@ def source_class(key: str, known: frozenset[str]) -> str:
 
 
 def key_kind(key: str) -> str:
-    """The kind a key expression fusion/NS/KIND/ID names: "meas", "input" or "truth", else "other"."""
-    parts = key.split("/")
-    return parts[2] if len(parts) == 4 and parts[2] in ("meas", "input", "truth") else "other"
+    """The kind of sample a key expression fusion/NS/KIND/ID names (fusion.messages.key_kind):
+    "meas", "input" or "truth", else "other"."""
+    kind = m.key_kind(key)
+    return kind if kind in _SAMPLE_KINDS else "other"
+
+
+_SAMPLE_KINDS = frozenset(("meas", "input", "truth"))
 
 
 class IntakeQueue:

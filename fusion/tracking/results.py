@@ -237,7 +237,8 @@ class Counts:
     Intake: received = applied + inputs + truth + sum(refused.values()) (applied: measurements;
     inputs: control inputs; duplicates are refused with reason "duplicate"; truth samples are
     counted by the pipeline, 0 in a bare tracker). Of the refused, inputs_refused were control
-    inputs and truth_refused truth samples (the pipeline's), whatever the reason; the rest were
+    inputs, truth_refused truth samples and other_refused samples on a key that names no kind
+    (not fusion/NS/meas|input|truth/ID; the pipeline's), whatever the reason; the rest were
     measurements.
     What the data did (a function of the accepted measurements, whatever their arrival order):
     updates, births, births_refused_capacity, unassigned (in a gate, taken by no track; such a
@@ -253,6 +254,7 @@ class Counts:
     inputs: int = 0
     inputs_refused: int = 0
     truth_refused: int = 0
+    other_refused: int = 0
     refused: Mapping[Reason, int] = field(default_factory=dict)
     updates: int = 0
     births: int = 0
@@ -272,11 +274,11 @@ class Counts:
 
     def flat(self) -> dict[str, int]:
         """Every count under a path-like name ("refused/duplicate", "deletions/misses"), sorted; like
-        the refusals by reason, the refused inputs and truth samples are there once there were any."""
+        the refusals by reason, the refused inputs, truth and other samples are there once there were any."""
         out = {k: getattr(self, k) for k in ("received", "applied", "inputs", "truth", "updates", "births",
                                              "births_refused_capacity", "unassigned", "confirmations",
                                              "numerical_skips", "replays", "replayed_scans", "rescans", "late_applied")}
-        out.update({k: getattr(self, k) for k in ("inputs_refused", "truth_refused") if getattr(self, k)})
+        out.update({k: n for k in ("inputs_refused", "truth_refused", "other_refused") if (n := getattr(self, k))})
         out.update({f"refused/{r.value}": n for r, n in self.refused.items()})
         out.update({f"deletions/{r.value.replace(' ', '_')}": n for r, n in self.deletions.items()})
         return dict(sorted(out.items()))

@@ -1,8 +1,10 @@
 """SIGTERM with a full queue: the drain stops at intake.drain_deadline_s, what is left is
-dropped and counted ("shutdown"), and the recording is complete."""
+dropped and counted ("shutdown") by the kind its key names (truth samples as truth), and the
+recording is complete."""
 
 from __future__ import annotations
 
+import ast
 import os
 import signal
 import subprocess
@@ -13,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from fusion import messages as m
+from fusion.cli.report import counts_line
 from fusion.io.inspect import summarise
 from fusion.io.streamfile import StreamReader
 from fusion.io.zenoh_bus import free_tcp_port
@@ -52,6 +55,9 @@ def test_sigterm_with_a_full_queue_stops_at_the_deadline_with_a_complete_recordi
                 xy = rng.uniform(-3000.0, 3000.0, 2).tolist()
                 p.put(m.encode(m.Measurement(sensor_id="cam1", t_ns=t0 + (i // 200) * 10_000_000, seq=i,
                                              data=m.Cartesian(pos_m=xy, std_m=[3.0, 3.0]))))
+            bad_truth = publisher(s, m.truth_key("demo", "t1"))
+            for _ in range(n_truth := 500):  # refused as malformed, or dropped at shutdown: truth either way
+                bad_truth.put(b"\x00")
             st = m.decode_status(query(s, m.status_key("demo")))
         finally:
             s.close()
@@ -76,4 +82,8 @@ def test_sigterm_with_a_full_queue_stops_at_the_deadline_with_a_complete_recordi
     c = summary.counts
     assert c["refused/shutdown"] > 0
     frames = sum(1 for _ in StreamReader(rrd[0].with_suffix(".fstream")))
-    assert frames + c["refused/shutdown"] == n, "a sample was neither processed (in the stream) nor counted"
+    assert frames + c["refused/shutdown"] == n + n_truth, "a sample was neither processed (in the stream) nor counted"
+    stopped = next(x for x in text.splitlines() if "fusion service stopped: " in x)
+    final = ast.literal_eval(stopped.split("fusion service stopped: ", 1)[1])
+    assert (final["truth"], final["truth_refused"]) == (0, n_truth), final
+    assert counts_line(final).startswith(f"received {n} measurements: "), counts_line(final)
