@@ -112,12 +112,11 @@ def match_truth(t_ns: Array, X: Array, P: Array, truth: TruthTable, pi: list[int
                 ) -> tuple[Array, Array, list[str]]:
     """(row indices, true states (k, d), target ids) of the estimates matched to a truth target.
 
-    The true targets at each estimate's time, in the order of their ids (a time's block of
-    `truth`), are its candidates; the
-    nearest in position is found for every estimate at once where a time has at most 16 (the
-    distances to all candidates, padded), by a k-d tree per time where it has more; one batched
-    solve gives every squared Mahalanobis distance (in closed form for 2-D positions, P's (0, 1)
-    element as the off-diagonal pair)."""
+    The true targets at each estimate's time, in the order of their ids (the time's block of
+    `truth`), are its candidates; the nearest in position is found for every estimate at once
+    where a time has at most 16 (the distances to all candidates, padded), by a k-d tree per time
+    where it has more; one batched solve gives every squared Mahalanobis distance (in closed form
+    for 2-D positions, P's (0, 1) element as the off-diagonal pair)."""
     d = X.shape[1]
     times, inverse = np.unique(t_ns, return_inverse=True)
     start = np.zeros(len(times), dtype=np.int64)

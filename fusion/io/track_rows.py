@@ -27,9 +27,6 @@ from fusion.tracking.results import Estimate
 OSPA_EVERY_NS = 1_000_000_000  # OSPA / GOSPA at most once per second of sensor time
 OSPA_MAX_POINTS = 300  # and for scenes of at most this many tracks and targets (the assignment is cubic)
 MAX_VIEWED = 6  # tracks with views of their own: the first confirmed ones (fusion.io.viewed)
-# truth times kept for scoring (the oldest half dropped past this): a bound for a run without a
-# window; with one, the truth before the horizon is dropped at each flush (forget_truth_before)
-TRUTH_KEPT = 100_000
 # measurements in the position panels: the role's colour, translucent and small. Rerun draws a
 # plot's points after all of its lines whatever the entity order (seen in screenshots, 0.41), so
 # the estimate line (wider, opaque) can only show through them: at alpha 255 they hid it; at 64
@@ -45,7 +42,7 @@ class Rows:
         self.pi = pi
         self.ki = sorted(set(pi) | set(vi))  # kinematic components: what NEES is computed over
         self.axes = [layout[i] for i in pi]
-        self.truth = TruthTable(TRUTH_KEPT)
+        self.truth = TruthTable()  # at most truth_table.KEPT times; before the horizon dropped at each flush
         self.choice = ViewedTracks(MAX_VIEWED)
         self._held: list[Stacked] = []  # the candidates' rows, until the choice is settled
         self._last: dict[int, tuple[int, int, int, Array]] = {}  # viewed track -> newest (t, step, arrival, world)
@@ -88,8 +85,8 @@ class Rows:
     def forget_truth_before(self, t_ns: int) -> None:
         """Drop the truth of times before t_ns: no estimate to score is before it any more (the
         sink passes the tracker's horizon, or the oldest estimate still waiting if older). Kept
-        until TRUTH_KEPT times, truth at 667 targets and 10 Hz held ~1.1 MB more every second
-        (~170 bytes a sample), 11 GB before the first drop."""
+        until fusion.io.truth_table.KEPT times, truth at 667 targets and 10 Hz held ~1.1 MB more
+        every second (~170 bytes a sample in the dict it was then), 11 GB before the first drop."""
         self.truth.forget_before(t_ns)
 
     # ---- one flush -------------------------------------------------------------------------------

@@ -1,10 +1,10 @@
 """The true states a recording scores its estimates against, by time.
 
-Each time's truth is one block: its targets' ids sorted (a numpy str array) and their states
-stacked in that order, S (k, d) float64. Scoring a flush's estimates (fusion.io.derive.match_truth)
-and its OSPA/GOSPA read a time's truth as that one array; a batch of truth samples goes in with a
-few numpy calls for each time it holds (usually one), where a dict of dicts took a Python call and
-a dict entry per sample, and every read stacked the samples again.
+Each time's truth is one block: its targets' ids sorted (a list) and their states stacked in that
+order, S (k, d) float64. Scoring a flush's estimates (fusion.io.derive.match_truth) and its
+OSPA/GOSPA read a time's truth as that one array; a batch of truth samples goes in as the block of
+each time it holds (usually one: a simulation's truth of every target at a time), where a dict of
+dicts took a Python call and a dict entry per sample, and every read stacked the samples again.
 
 A sample for a (time, target) already held replaces it: the last one given wins, within a batch
 and across batches. Times are dropped from the oldest: `forget_before(t_ns)`, once no estimate

@@ -1,6 +1,6 @@
 """The recording keeps the truth it scores against only from the tracker's horizon on (or from the
 oldest estimate still waiting for its time's truth): a service fed truth for hours held every
-sample until TRUTH_KEPT times (~170 bytes a sample, ~1.1 MB a second at 667 targets and 10 Hz).
+sample until fusion.io.truth_table.KEPT times (~170 bytes a sample then, ~1.1 MB a second at 667 targets and 10 Hz).
 Dropping it changes nothing in the file: the same rows as a sink that keeps all of it, for the
 mix scenario with measurements 1.9 s late (replays revise estimates back to the window's edge)."""
 
