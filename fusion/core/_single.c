@@ -28,14 +28,14 @@
 #include <math.h>
 #include <string.h>
 
-enum { OK = 0, NONFINITE = 1, SHAPE = 2, BAD_Z = 3, BAD_R = 4, S_NOT_PD = 5, NOT_TAKEN = -1 };
-enum { CHECK_Z = 1, CHECK_R = 2, HEAD = 4, KERNEL_CARTESIAN = 1, KERNEL_RADAR2D = 2 };
+#include "_single.h"
+
 
 static const double PI = 3.141592653589793;
 static const double TWO_PI = 6.283185307179586;
 
-static PyTypeObject *state_type = NULL;  /* fusion.core.gaussian.GaussianState */
-static PyTypeObject *update_type = NULL; /* fusion.core.gaussian.Update */
+PyTypeObject *state_type = NULL;  /* fusion.core.gaussian.GaussianState */
+PyTypeObject *update_type = NULL; /* fusion.core.gaussian.Update */
 
 /* Scratch of predict and update (the step keeps its own in the blob), grown on demand. */
 static double *scratch = NULL;
@@ -336,7 +336,7 @@ static int bound(void) {
 
 /* predict(x, P, FQ, t_ns, check): compiled_step.predict_fq; the state also where x- is not
  * finite and check is false (as the filter returns it). */
-static PyObject *predict(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
+PyObject *predict(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
     if (nargs != 5) {
         PyErr_SetString(PyExc_TypeError, "predict(x, P, FQ, t_ns, check) takes 5 arguments");
         return NULL;
@@ -367,7 +367,7 @@ static PyObject *predict(PyObject *self, PyObject *const *args, Py_ssize_t nargs
 }
 
 /* update(code, x, P, z, spec, R, t_ns): compiled_step.update_model. */
-static PyObject *update(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
+PyObject *update(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
     if (nargs != 7) {
         PyErr_SetString(PyExc_TypeError, "update(code, x, P, z, spec, R, t_ns) takes 7 arguments");
         return NULL;
@@ -511,5 +511,7 @@ static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_single", NULL, -1, 
 
 PyMODINIT_FUNC PyInit__single(void) {
     import_array();
-    return PyModule_Create(&module);
+    PyObject *m = PyModule_Create(&module);
+    if (m != NULL && add_filter_calls(m) < 0) Py_CLEAR(m);
+    return m;
 }

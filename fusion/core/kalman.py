@@ -43,6 +43,7 @@ from fusion.core.kalman_reference import LOG_2PI, predict_arrays, update_arrays,
 from fusion.core.measurement import MeasurementModel
 from fusion.core.motion import LinearMotionModel, MotionModel
 from fusion.core.single import NOT_TAKEN as _NOT_TAKEN
+from fusion.core.single import FilterCalls as _FilterCalls
 from fusion.core.single import predict as _predict
 from fusion.core.single import predict_numba as _predict_numba
 from fusion.core.single import step as _step_call
@@ -116,18 +117,19 @@ class FilterBase:
             raise NumericalError(f"prediction produced a non-finite state: {x}")
 
 
-class ExtendedKalmanFilter(FilterBase):
+class ExtendedKalmanFilter(FilterBase, _FilterCalls):
     """EKF over any motion model and any measurement model (exact KF when both are linear).
 
     Fast paths (the module docstring): one compiled call per predict, update or step where the
     models have compiled twins; anything else, or anything a call refuses, takes the numpy path,
-    which raises the typed error.
+    which raises the typed error. predict and update are fusion.core.single.FilterCalls' methods
+    (C where it was built): they make the compiled call of the common case themselves and hand
+    everything else to `_predict_general` and `_update_general` below, the same results.
     """
-
-    _linear_only = False  # (KalmanFilter: update refuses a nonlinear measurement model)
 
     def __init__(self, motion: MotionModel, *, check: bool = True) -> None:
         super().__init__(motion, check=check)
+        self._linear_only = False  # (KalmanFilter: update refuses a nonlinear measurement model)
         self._transitions = TransitionCache(motion) if motion.is_linear and isinstance(
             motion, LinearMotionModel) else None
         n = motion.ndim_state
@@ -144,14 +146,15 @@ class ExtendedKalmanFilter(FilterBase):
 
     @check.setter
     def check(self, on: bool) -> None:
-        self._check = on
+        self._check = on = bool(on)
         self._plans = {}
         # the flags of update's compiled call with the model's R, and with a given one
         self._flags_model_R = _CHECK_Z if on else 0
         self._flags_given_R = _CHECK_Z | _CHECK_R if on else 0
 
-    def predict(self, state: GaussianState, t_ns: int, *, u: ArrayLike | None = None) -> GaussianState:
-        """Predict to t_ns (>= state.t_ns); u is the control input if the model takes one."""
+    def _predict_general(self, state: GaussianState, t_ns: int, *, u: ArrayLike | None = None) -> GaussianState:
+        """predict (FilterCalls) of any case: predict to t_ns (>= state.t_ns); u is the control
+        input if the model takes one."""
         cache = self._transitions
         if cache is not None and u is None:
             d = t_ns - state.t_ns
@@ -249,10 +252,11 @@ class ExtendedKalmanFilter(FilterBase):
         self._finite(x)
         return GaussianState(x, P, int(t_ns))
 
-    def update(
+    def _update_general(
         self, state: GaussianState, z: ArrayLike, model: MeasurementModel, *, R: ArrayLike | None = None
     ) -> Update:
-        """Fold z (taken at state.t_ns) in; R defaults to the model's."""
+        """update (FilterCalls) of any case: fold z (taken at state.t_ns) in; R defaults to the
+        model's."""
         if self._linear_only and not model.is_linear:
             raise ConfigError(
                 f"KalmanFilter needs a linear measurement model, got {type(model).__name__}; "
@@ -291,8 +295,7 @@ class KalmanFilter(ExtendedKalmanFilter):
         if not motion.is_linear:
             raise ConfigError(f"KalmanFilter needs a linear motion model, got {type(motion).__name__}")
         super().__init__(motion, check=check)
-
-    _linear_only = True  # update refuses a nonlinear measurement model
+        self._linear_only = True  # update refuses a nonlinear measurement model
 
     def _fuses(self, model: MeasurementModel) -> bool:
         return model.is_linear and ExtendedKalmanFilter._fuses(self, model)

@@ -3,6 +3,7 @@
     predict(x, P, FQ, t_ns, check) -> GaussianState | int
     update(code, x, P, z, spec, R, t_ns) -> Update | int
     step(x, P, z, blob, t_ns) -> Update | int
+    FilterCalls: ExtendedKalmanFilter's predict and update, the base that gives it them
 
 predict is fusion.core.compiled_step.predict_fq (FQ = [F(dt); Q(dt)] of
 fusion.core.transitions), returning GaussianState(x-, P-, t_ns), also where x- is not finite
@@ -22,6 +23,13 @@ without fused multiply-adds, so the results are the same bits (tests/core/test_s
 They exist for their cost, not their arithmetic: a numba call types each array argument (8 to 11
 here) and its results are allocated around it, about 1.1 us of a ~1.8 us step; the C calls take
 the arguments as they are and allocate and build the results themselves (~0.6 us a step).
+
+FilterCalls (fusion/core/_filter_calls.c) is the base of ExtendedKalmanFilter (and so of
+KalmanFilter) that gives it predict and update as C methods: the common case (no u, a transition
+already cached; no R, a model with a compiled twin) makes the call above from C, anything else
+goes to the filter's `_predict_general` / `_update_general` with the arguments as they came.
+What it saves is the Python frames and attribute reads around the calls (~0.2 us each).
+Without the extension it is FilterCallsPython, which goes to the general methods at once.
 """
 
 from __future__ import annotations
@@ -83,12 +91,30 @@ def step_numba(x: Array, P: Array, z: Array, blob: Array, t_ns: int) -> Update |
     return _new(Update, (_new(GaussianState, (xn, Pn, t_ns)), y, S, nis, ll))
 
 
+class FilterCallsPython:
+    """ExtendedKalmanFilter's predict and update where the C extension was not built: its general
+    methods, which make the numba twins' calls (the C methods take their common case first)."""
+
+    _transitions: object = None
+    _check = True
+    _linear_only = False
+
+    def predict(self, state: GaussianState, t_ns: int, *, u: object = None) -> GaussianState:
+        """Predict to t_ns (>= state.t_ns); u is the control input if the model takes one."""
+        return self._predict_general(state, t_ns, u=u)  # type: ignore[attr-defined, no-any-return]
+
+    def update(self, state: GaussianState, z: object, model: object, *, R: object = None) -> Update:
+        """Fold z (taken at state.t_ns) in; R defaults to the model's."""
+        return self._update_general(state, z, model, R=R)  # type: ignore[attr-defined, no-any-return]
+
+
 try:
+    from fusion.core._single import FilterCalls, predict, step, update
     from fusion.core._single import bind as _bind
-    from fusion.core._single import predict, step, update
 except ImportError:  # built without a C compiler (setup.py: the extension is optional)
     COMPILED = False
     predict, update, step = predict_numba, update_numba, step_numba
+    FilterCalls = FilterCallsPython  # type: ignore[misc, assignment]
 else:
     COMPILED = True
     _bind(GaussianState, Update)
