@@ -288,6 +288,12 @@ class ExtendedKalmanFilter(FilterBase, _FilterCalls):
         return Update(GaussianState(xn, Pn, state.t_ns), y, S, nis, ll)
 
 
+# Arguments that do not bind are refused by the general method a call was handed to: named as the
+# method called (the message as before: "ExtendedKalmanFilter.predict() missing 1 required ...").
+ExtendedKalmanFilter._predict_general.__qualname__ = "ExtendedKalmanFilter.predict"
+ExtendedKalmanFilter._update_general.__qualname__ = "ExtendedKalmanFilter.update"
+
+
 class KalmanFilter(ExtendedKalmanFilter):
     """The linear Kalman filter: a linear motion model, linear measurement models only."""
 

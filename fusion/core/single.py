@@ -99,13 +99,15 @@ class FilterCallsPython:
     _check = True
     _linear_only = False
 
-    def predict(self, state: GaussianState, t_ns: int, *, u: object = None) -> GaussianState:
-        """Predict to t_ns (>= state.t_ns); u is the control input if the model takes one."""
-        return self._predict_general(state, t_ns, u=u)  # type: ignore[attr-defined, no-any-return]
+    def predict(self, *args: object, **kwargs: object) -> GaussianState:
+        """predict(state, t_ns, *, u=None): predict to t_ns (>= state.t_ns); u is the control
+        input if the model takes one."""
+        return self._predict_general(*args, **kwargs)  # type: ignore[attr-defined, no-any-return]
 
-    def update(self, state: GaussianState, z: object, model: object, *, R: object = None) -> Update:
-        """Fold z (taken at state.t_ns) in; R defaults to the model's."""
-        return self._update_general(state, z, model, R=R)  # type: ignore[attr-defined, no-any-return]
+    def update(self, *args: object, **kwargs: object) -> Update:
+        """update(state, z, model, *, R=None): fold z (taken at state.t_ns) in; R defaults to the
+        model's."""
+        return self._update_general(*args, **kwargs)  # type: ignore[attr-defined, no-any-return]
 
 
 try:

@@ -152,6 +152,9 @@ def test_every_case_the_c_methods_hand_on_agrees_with_the_general_methods() -> N
     }
     for what, (f, args, kw) in updates.items():
         _agree(_outcome(f.update, *args, **kw), _outcome(f._update_general, *args, **kw), what)
+    assert _outcome(kf.predict, s) == (TypeError, "ExtendedKalmanFilter.predict() missing 1 required positional "
+                                                  "argument: 't_ns'")
+    assert _outcome(kf.update, p, z, pos, R=None, Q=1)[1].startswith("ExtendedKalmanFilter.update() got an unexpected")
     assert _outcome(kf.update, p, zr, radar)[0].__name__ == "ConfigError"
     assert _outcome(kf.predict, s, s.t_ns - 1)[0].__name__ == "TimeError"
 
