@@ -139,6 +139,16 @@ class ExtendedKalmanFilter(FilterBase, _FilterCalls):
         self._ws = np.empty(_step.work_size(n, n + 2))
         self._plans: dict[MeasurementModel, StepPlan] = {}  # fusion.core.step_plan
 
+    def __getstate__(self) -> dict[str, object]:
+        """What a copy or a pickle takes: the attributes, with FilterCalls' fields (C fields where
+        it was built, which are in no __dict__)."""
+        return {**self.__dict__, "_transitions": self._transitions, "_check": self._check,
+                "_linear_only": self._linear_only}
+
+    def __setstate__(self, state: dict[str, object]) -> None:
+        for name, value in state.items():
+            setattr(self, name, value)
+
     @property
     def check(self) -> bool:
         """Whether inputs are validated; setting it drops the step plans (which carry the flag)."""

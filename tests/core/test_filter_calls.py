@@ -11,12 +11,15 @@ general methods (`_predict_general`, `_update_general`), which are what the meth
 - the common case (a cached time step, a model with a compiled twin, no u, no R) never reaches
   the general methods: the C methods take it themselves;
 - nothing is leaked or kept;
+- a copied or pickled filter carries the fields the C methods read (and gives the same results);
 - without the extension, FilterCallsPython's methods are the general methods.
 """
 
 from __future__ import annotations
 
+import copy
 import gc
+import pickle
 import sys
 import tracemalloc
 
@@ -277,3 +280,27 @@ def test_nothing_is_leaked_or_kept() -> None:
         tracemalloc.stop()
     assert grown < 20_000, grown
     assert [sys.getrefcount(o) for o in ins] == before
+
+
+@pytest.mark.parametrize("how", ["copy", "deepcopy", "pickle"])
+def test_a_copied_or_pickled_filter_is_the_same_filter(how: str) -> None:
+    """The fields the C methods read (FilterCalls': in no __dict__ where it was built) go with a
+    copy and a pickle, as every attribute did when the filter was a plain Python class."""
+    rng = np.random.default_rng(23)
+    for meas in (BUILT["radar"], CartesianPosition(ndim_state=4, indices=(0, 2), R=[1.0, 1.0])):
+        for check in (True, False):
+            f = _filter(meas, check)
+            s = _start(4, rng)
+            t = s.t_ns + 100_000_000
+            f.predict(s, t)  # a cached step goes with it
+            g = {"copy": copy.copy, "deepcopy": copy.deepcopy,
+                 "pickle": lambda o: pickle.loads(pickle.dumps(o))}[how](f)
+            assert type(g) is type(f) and g.check is check and g._linear_only is f._linear_only
+            assert (g._transitions is f._transitions) is (how == "copy")
+            assert 0.1 in g._transitions
+            p = g.predict(s, t)
+            _same_state(p, f.predict(s, t))
+            z = meas.h(p.x) + 0.5
+            _same(g.update(p, z, meas), f.update(p, z, meas))
+            bad = np.array([np.nan, 0.0])  # refused where checked, through where not
+            _agree(_outcome(g.update, p, bad, meas), _outcome(f.update, p, bad, meas), "a bad z")
