@@ -1,24 +1,28 @@
-/* fusion.core._single.FilterCalls: ExtendedKalmanFilter's (and so KalmanFilter's) predict and
- * update as C methods, for their call cost.
+/* fusion.core._single.FilterCalls: ExtendedKalmanFilter's (and so KalmanFilter's) predict,
+ * update and step as C methods, for their call cost.
  *
  *   predict(state, t_ns, *, u=None) -> GaussianState
  *   update(state, z, model, *, R=None) -> Update
+ *   step(state, t_ns, z, model, *, R=None, u=None) -> Update
  *
  * Each takes the one case that is most of a filter's calls and makes _single.c's call for it;
- * everything else goes to the filter's own Python method, `_predict_general` or
- * `_update_general` (fusion.core.kalman), with the arguments as they came:
+ * everything else goes to the filter's own Python method, `_predict_general`, `_update_general`
+ * or `_step_general` (fusion.core.kalman), with the arguments as they came:
  *   - predict: no u, a TransitionCache (`_transitions`, a dict dt_s -> FQ) that already holds
  *     FQ for dt_s = d / 10^9 (d = t_ns - state.t_ns, both ints, 0 <= d <= 2^53, so that the
  *     division is Python's d / NS_PER_S to the bit), then predict(x, P, FQ, t_ns, `_check`);
  *   - update: no R, the model's kernel_kind > 0 (and is_linear where `_linear_only`), then
- *     update(kind << 2 | CHECK_Z if `_check`, x, P, z, model.kernel_spec, model.R, state.t_ns).
+ *     update(kind << 2 | CHECK_Z if `_check`, x, P, z, model.kernel_spec, model.R, state.t_ns);
+ *   - step: no R, no u, a step plan for the model (`_plans[model]`, fusion.core.step_plan) made
+ *     with the model's R of now (plan.R is model.R) that already holds the blob of d =
+ *     t_ns - state.t_ns (ints, d >= 0), then step(x, P, z, plan.blobs[d], t_ns).
  * What such a call returns other than the GaussianState or Update (a status, NOT_TAKEN) also
  * goes to the general method, which makes the same call again and takes numba's twin or the
  * numpy path from there (and raises the typed error): the same results, the same errors as the
  * general methods alone (tests/core/test_filter_calls.py).
  *
- * _transitions, _check and _linear_only are this type's fields, read and set from Python as
- * attributes (the filter's __init__ and its `check` setter set them).
+ * _transitions, _plans, _check and _linear_only are this type's fields, read and set from Python
+ * as attributes (the filter's __init__ and its `check` setter set them).
  */
 #include "_single.h"
 
@@ -27,11 +31,13 @@
 typedef struct {
     PyObject_HEAD
     PyObject *transitions; /* a TransitionCache, or NULL/None */
+    PyObject *plans;       /* model -> StepPlan (a dict), or NULL/None */
     char check;
     char linear_only;
 } FilterCalls;
 
-static PyObject *s_predict_general, *s_update_general, *s_is_linear, *s_kernel_kind, *s_kernel_spec, *s_R;
+static PyObject *s_predict_general, *s_update_general, *s_step_general, *s_is_linear, *s_kernel_kind, *s_kernel_spec,
+    *s_R;
 
 /* self.<name>(*args, **kwargs) as the method was called. */
 static PyObject *general(PyObject *self, PyObject *name, PyObject *const *args, size_t nargsf, PyObject *kwnames) {
@@ -74,7 +80,7 @@ static PyObject *fc_predict(FilterCalls *self, PyObject *const *args, size_t nar
                 Py_INCREF(FQ);
                 PyObject *argv[5] = {PyTuple_GET_ITEM(state, 0), PyTuple_GET_ITEM(state, 1), FQ, t_ns,
                                      self->check ? Py_True : Py_False};
-                PyObject *out = predict(NULL, argv, 5);
+                PyObject *out = single_predict(NULL, argv, 5);
                 Py_DECREF(FQ);
                 if (out == NULL || Py_TYPE(out) == state_type) return out;
                 Py_DECREF(out);
@@ -122,7 +128,7 @@ static PyObject *model_update(FilterCalls *self, PyObject *state, PyObject *z, P
     if (code != NULL) {
         PyObject *argv[7] = {code, PyTuple_GET_ITEM(state, 0), PyTuple_GET_ITEM(state, 1), z, spec, R,
                              PyTuple_GET_ITEM(state, 2)};
-        out = update(NULL, argv, 7);
+        out = single_update(NULL, argv, 7);
     }
     Py_XDECREF(spec);
     Py_XDECREF(R);
@@ -141,13 +147,55 @@ static PyObject *fc_update(FilterCalls *self, PyObject *const *args, size_t narg
     return general((PyObject *)self, s_update_general, args, nargsf, kwnames);
 }
 
+/* The step call on the filter's plan for the model; NULL without an error where it does not
+ * apply. StepPlan is a named tuple whose first two fields are blobs (dt_ns -> blob) and R. */
+static PyObject *planned_step(FilterCalls *self, PyObject *state, PyObject *t_ns, PyObject *z, PyObject *model) {
+    long long t, t0, d;
+    if (self->plans == NULL || !PyDict_CheckExact(self->plans) || !exact_int(t_ns, &t) ||
+        !exact_int(PyTuple_GET_ITEM(state, 2), &t0) || __builtin_sub_overflow(t, t0, &d) || d < 0)
+        return NULL;
+    PyObject *plan = PyDict_GetItemWithError(self->plans, model); /* borrowed */
+    if (plan == NULL || !PyTuple_Check(plan) || PyTuple_GET_SIZE(plan) < 2 || !PyDict_CheckExact(PyTuple_GET_ITEM(plan, 0))) {
+        PyErr_Clear(); /* (a model that cannot be a key: the general method says so) */
+        return NULL;
+    }
+    Py_INCREF(plan);
+    PyObject *R = PyObject_GetAttr(model, s_R);
+    PyObject *key = R == PyTuple_GET_ITEM(plan, 1) ? PyLong_FromLongLong(d) : NULL;
+    PyObject *packed = key == NULL ? NULL : PyDict_GetItemWithError(PyTuple_GET_ITEM(plan, 0), key);
+    PyObject *out = NULL;
+    if (packed != NULL) {
+        Py_INCREF(packed);
+        PyObject *argv[5] = {PyTuple_GET_ITEM(state, 0), PyTuple_GET_ITEM(state, 1), z, packed, t_ns};
+        out = single_step(NULL, argv, 5);
+        Py_DECREF(packed);
+    }
+    Py_XDECREF(key);
+    Py_XDECREF(R);
+    Py_DECREF(plan);
+    if (out != NULL && Py_TYPE(out) != update_type) Py_CLEAR(out);
+    if (out == NULL) PyErr_Clear();
+    return out;
+}
+
+static PyObject *fc_step(FilterCalls *self, PyObject *const *args, size_t nargsf, PyObject *kwnames) {
+    if (PyVectorcall_NARGS(nargsf) == 4 && kwnames == NULL && state_type != NULL &&
+        Py_TYPE(args[0]) == state_type && PyTuple_GET_SIZE(args[0]) == 3) {
+        PyObject *out = planned_step(self, args[0], args[1], args[2], args[3]);
+        if (out != NULL) return out;
+    }
+    return general((PyObject *)self, s_step_general, args, nargsf, kwnames);
+}
+
 static int fc_traverse(FilterCalls *self, visitproc visit, void *arg) {
     Py_VISIT(self->transitions);
+    Py_VISIT(self->plans);
     return 0;
 }
 
 static int fc_clear(FilterCalls *self) {
     Py_CLEAR(self->transitions);
+    Py_CLEAR(self->plans);
     return 0;
 }
 
@@ -164,12 +212,17 @@ static PyMethodDef fc_methods[] = {
     {"update", (PyCFunction)(void (*)(void))fc_update, METH_FASTCALL | METH_KEYWORDS,
      "update($self, state, z, model, *, R=None)\n--\n\n"
      "Fold z (taken at state.t_ns) in; R defaults to the model's."},
+    {"step", (PyCFunction)(void (*)(void))fc_step, METH_FASTCALL | METH_KEYWORDS,
+     "step($self, state, t_ns, z, model, *, R=None, u=None)\n--\n\n"
+     "Predict to t_ns, then fold z (taken at t_ns) in: update(predict(state, t_ns, u=u), z, model, "
+     "R=R), the same Update bit for bit and the same errors."},
     {NULL, NULL, 0, NULL},
 };
 
 static PyMemberDef fc_members[] = {
     {"_transitions", T_OBJECT, offsetof(FilterCalls, transitions), 0,
      "F(dt) and Q(dt) per dt_s (a TransitionCache), or None"},
+    {"_plans", T_OBJECT, offsetof(FilterCalls, plans), 0, "the step plans, per model (a dict), or None"},
     {"_check", T_BOOL, offsetof(FilterCalls, check), 0, "whether inputs are validated"},
     {"_linear_only", T_BOOL, offsetof(FilterCalls, linear_only), 0,
      "whether update refuses a nonlinear measurement model"},
@@ -180,7 +233,7 @@ static PyTypeObject FilterCallsType = {
     PyVarObject_HEAD_INIT(NULL, 0).tp_name = "fusion.core._single.FilterCalls",
     .tp_basicsize = sizeof(FilterCalls),
     .tp_flags = Py_TPFLAGS_DEFAULT | Py_TPFLAGS_BASETYPE | Py_TPFLAGS_HAVE_GC,
-    .tp_doc = "predict and update of ExtendedKalmanFilter as C methods (fusion.core._filter_calls.c).",
+    .tp_doc = "predict, update and step of ExtendedKalmanFilter as C methods (fusion/core/_filter_calls.c).",
     .tp_new = PyType_GenericNew,
     .tp_traverse = (traverseproc)fc_traverse,
     .tp_clear = (inquiry)fc_clear,
@@ -192,6 +245,7 @@ static PyTypeObject FilterCallsType = {
 int add_filter_calls(PyObject *module) {
     struct { PyObject **s; const char *name; } names[] = {
         {&s_predict_general, "_predict_general"}, {&s_update_general, "_update_general"},
+        {&s_step_general, "_step_general"},
         {&s_is_linear, "is_linear"}, {&s_kernel_kind, "kernel_kind"}, {&s_kernel_spec, "kernel_spec"}, {&s_R, "R"},
     };
     for (size_t i = 0; i < sizeof(names) / sizeof(names[0]); i++)

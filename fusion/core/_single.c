@@ -336,7 +336,7 @@ static int bound(void) {
 
 /* predict(x, P, FQ, t_ns, check): compiled_step.predict_fq; the state also where x- is not
  * finite and check is false (as the filter returns it). */
-PyObject *predict(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
+PyObject *single_predict(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
     if (nargs != 5) {
         PyErr_SetString(PyExc_TypeError, "predict(x, P, FQ, t_ns, check) takes 5 arguments");
         return NULL;
@@ -367,7 +367,7 @@ PyObject *predict(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
 }
 
 /* update(code, x, P, z, spec, R, t_ns): compiled_step.update_model. */
-PyObject *update(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
+PyObject *single_update(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
     if (nargs != 7) {
         PyErr_SetString(PyExc_TypeError, "update(code, x, P, z, spec, R, t_ns) takes 7 arguments");
         return NULL;
@@ -433,7 +433,7 @@ PyObject *update(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
 }
 
 /* step(x, P, z, blob, t_ns): compiled_packed.step_packed on its blob (layout in that module). */
-static PyObject *step(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
+PyObject *single_step(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
     if (nargs != 5) {
         PyErr_SetString(PyExc_TypeError, "step(x, P, z, blob, t_ns) takes 5 arguments");
         return NULL;
@@ -494,13 +494,13 @@ static PyObject *bind(PyObject *self, PyObject *args) {
 }
 
 static PyMethodDef methods[] = {
-    {"predict", (PyCFunction)(void (*)(void))predict, METH_FASTCALL,
+    {"predict", (PyCFunction)(void (*)(void))single_predict, METH_FASTCALL,
      "predict(x, P, FQ, t_ns, check) -> GaussianState | int: compiled_step.predict_fq, its results "
      "allocated and the state built."},
-    {"update", (PyCFunction)(void (*)(void))update, METH_FASTCALL,
+    {"update", (PyCFunction)(void (*)(void))single_update, METH_FASTCALL,
      "update(code, x, P, z, spec, R, t_ns) -> Update | int: compiled_step.update_model, its results "
      "allocated and the Update built."},
-    {"step", (PyCFunction)(void (*)(void))step, METH_FASTCALL,
+    {"step", (PyCFunction)(void (*)(void))single_step, METH_FASTCALL,
      "step(x, P, z, blob, t_ns) -> Update | int: compiled_packed.step_packed, its results allocated "
      "and the Update built."},
     {"bind", bind, METH_VARARGS, "bind(GaussianState, Update): the classes the calls build."},

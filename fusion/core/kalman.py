@@ -122,9 +122,10 @@ class ExtendedKalmanFilter(FilterBase, _FilterCalls):
 
     Fast paths (the module docstring): one compiled call per predict, update or step where the
     models have compiled twins; anything else, or anything a call refuses, takes the numpy path,
-    which raises the typed error. predict and update are fusion.core.single.FilterCalls' methods
-    (C where it was built): they make the compiled call of the common case themselves and hand
-    everything else to `_predict_general` and `_update_general` below, the same results.
+    which raises the typed error. predict, update and step are fusion.core.single.FilterCalls'
+    methods (C where it was built): they make the compiled call of the common case themselves
+    and hand everything else to `_predict_general`, `_update_general` and `_step_general` below,
+    the same results.
     """
 
     def __init__(self, motion: MotionModel, *, check: bool = True) -> None:
@@ -142,7 +143,7 @@ class ExtendedKalmanFilter(FilterBase, _FilterCalls):
     def __getstate__(self) -> dict[str, object]:
         """What a copy or a pickle takes: the attributes, with FilterCalls' fields (C fields where
         it was built, which are in no __dict__)."""
-        return {**self.__dict__, "_transitions": self._transitions, "_check": self._check,
+        return {**self.__dict__, "_transitions": self._transitions, "_plans": self._plans, "_check": self._check,
                 "_linear_only": self._linear_only}
 
     def __setstate__(self, state: dict[str, object]) -> None:
@@ -181,10 +182,11 @@ class ExtendedKalmanFilter(FilterBase, _FilterCalls):
                 return out
         return self._predict_numpy(state, t, dt, u)
 
-    def step(self, state: GaussianState, t_ns: int, z: ArrayLike, model: MeasurementModel, *,
-             R: ArrayLike | None = None, u: ArrayLike | None = None) -> Update:
-        """Predict to t_ns, then fold z (taken at t_ns) in: update(predict(state, t_ns, u=u), z,
-        model, R=R), the same Update bit for bit and the same errors.
+    def _step_general(self, state: GaussianState, t_ns: int, z: ArrayLike, model: MeasurementModel, *,
+                      R: ArrayLike | None = None, u: ArrayLike | None = None) -> Update:
+        """step (FilterCalls) of any case: predict to t_ns, then fold z (taken at t_ns) in:
+        update(predict(state, t_ns, u=u), z, model, R=R), the same Update bit for bit and the
+        same errors.
 
         A linear motion model and a model with a compiled twin (linear for the KF), z a float64
         vector, no u: one compiled call. With the model's R, the call of the model's StepPlan
@@ -302,6 +304,7 @@ class ExtendedKalmanFilter(FilterBase, _FilterCalls):
 # method called (the message as before: "ExtendedKalmanFilter.predict() missing 1 required ...").
 ExtendedKalmanFilter._predict_general.__qualname__ = "ExtendedKalmanFilter.predict"
 ExtendedKalmanFilter._update_general.__qualname__ = "ExtendedKalmanFilter.update"
+ExtendedKalmanFilter._step_general.__qualname__ = "ExtendedKalmanFilter.step"
 
 
 class KalmanFilter(ExtendedKalmanFilter):

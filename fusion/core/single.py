@@ -3,7 +3,7 @@
     predict(x, P, FQ, t_ns, check) -> GaussianState | int
     update(code, x, P, z, spec, R, t_ns) -> Update | int
     step(x, P, z, blob, t_ns) -> Update | int
-    FilterCalls: ExtendedKalmanFilter's predict and update, the base that gives it them
+    FilterCalls: ExtendedKalmanFilter's predict, update and step, the base that gives it them
 
 predict is fusion.core.compiled_step.predict_fq (FQ = [F(dt); Q(dt)] of
 fusion.core.transitions), returning GaussianState(x-, P-, t_ns), also where x- is not finite
@@ -25,10 +25,11 @@ here) and its results are allocated around it, about 1.1 us of a ~1.8 us step; t
 the arguments as they are and allocate and build the results themselves (~0.6 us a step).
 
 FilterCalls (fusion/core/_filter_calls.c) is the base of ExtendedKalmanFilter (and so of
-KalmanFilter) that gives it predict and update as C methods: the common case (no u, a transition
-already cached; no R, a model with a compiled twin) makes the call above from C, anything else
-goes to the filter's `_predict_general` / `_update_general` with the arguments as they came.
-What it saves is the Python frames and attribute reads around the calls (~0.2 us each).
+KalmanFilter) that gives it predict, update and step as C methods: the common case (no u, a
+transition already cached; no R, a model with a compiled twin; for step, its plan's blob of the
+time step already made) makes the call above from C, anything else goes to the filter's
+`_predict_general` / `_update_general` / `_step_general` with the arguments as they came. What
+it saves is the Python frames and attribute reads around the calls (~0.2-0.4 us each).
 Without the extension it is FilterCallsPython, which goes to the general methods at once.
 """
 
@@ -92,10 +93,12 @@ def step_numba(x: Array, P: Array, z: Array, blob: Array, t_ns: int) -> Update |
 
 
 class FilterCallsPython:
-    """ExtendedKalmanFilter's predict and update where the C extension was not built: its general
-    methods, which make the numba twins' calls (the C methods take their common case first)."""
+    """ExtendedKalmanFilter's predict, update and step where the C extension was not built: its
+    general methods, which make the numba twins' calls (the C methods take their common case
+    first)."""
 
     _transitions: object = None
+    _plans: object = None
     _check = True
     _linear_only = False
 
@@ -108,6 +111,11 @@ class FilterCallsPython:
         """update(state, z, model, *, R=None): fold z (taken at state.t_ns) in; R defaults to the
         model's."""
         return self._update_general(*args, **kwargs)  # type: ignore[attr-defined, no-any-return]
+
+    def step(self, *args: object, **kwargs: object) -> Update:
+        """step(state, t_ns, z, model, *, R=None, u=None): predict to t_ns, then fold z (taken at
+        t_ns) in."""
+        return self._step_general(*args, **kwargs)  # type: ignore[attr-defined, no-any-return]
 
 
 try:

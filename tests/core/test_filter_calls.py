@@ -1,5 +1,6 @@
-"""The filter's predict and update as C methods (fusion.core.single.FilterCalls) against its
-general methods (`_predict_general`, `_update_general`), which are what the methods were before.
+"""The filter's predict, update and step as C methods (fusion.core.single.FilterCalls) against
+its general methods (`_predict_general`, `_update_general`, `_step_general`), which are what the
+methods were before.
 
 - over random states, time steps, z and every model of test_packed_step (hypothesis), validated
   or not, the methods return the same bits as the general methods;
@@ -99,6 +100,9 @@ def test_the_methods_are_the_general_methods_bit_for_bit(name: str, check: bool,
         z = meas.h(p.x) + rng.normal(0.0, 1.0, meas.ndim_meas)
         u = f.update(p, z, meas)
         _same(u, f._update_general(p, z, meas))
+        for _ in range(2):  # the first step of a time step makes its plan's blob, the second reads it
+            _same(f.step(s, t, z, meas), u)
+            _same(f._step_general(s, t, z, meas), u)
         s = u.state
 
 
@@ -155,9 +159,29 @@ def test_every_case_the_c_methods_hand_on_agrees_with_the_general_methods() -> N
     }
     for what, (f, args, kw) in updates.items():
         _agree(_outcome(f.update, *args, **kw), _outcome(f._update_general, *args, **kw), what)
+    kf.step(s, t, z, pos)  # a plan for pos with the blob of 0.1 s
+    steps = {
+        "R given": (kf, (s, t, z, pos), {"R": 2.0 * np.eye(2)}),
+        "u": (kfc, (s, t, z, pos), {"u": [1.0, -1.0]}),
+        "no plan yet": (ekf, (s, t, zr, radar), {}),
+        "a new time step": (kf, (s, t + 7, z, pos), {}),
+        "t a numpy int": (kf, (s, np.int64(t), z, pos), {}),
+        "t backwards": (kf, (s, s.t_ns - 1, z, pos), {}),
+        "no compiled twin": (kf, (s, t, z, moved), {}),
+        "radar to the KF": (kf, (s, t, zr, radar), {}),
+        "z a list": (kf, (s, t, list(z), pos), {}),
+        "z NaN": (kf, (s, t, np.array([np.nan, 0.0]), pos), {}),
+        "by keyword": (kf, (), {"state": s, "t_ns": t, "z": z, "model": pos}),
+        "too few": (kf, (s, t, z), {}),
+        "not a model": (kf, (s, t, z, object()), {}),
+    }
+    for what, (f, args, kw) in steps.items():
+        _agree(_outcome(f.step, *args, **kw), _outcome(f._step_general, *args, **kw), what)
     assert _outcome(kf.predict, s) == (TypeError, "ExtendedKalmanFilter.predict() missing 1 required positional "
                                                   "argument: 't_ns'")
     assert _outcome(kf.update, p, z, pos, R=None, Q=1)[1].startswith("ExtendedKalmanFilter.update() got an unexpected")
+    assert _outcome(kf.step, s, t) == (TypeError, "ExtendedKalmanFilter.step() missing 2 required positional "
+                                                 "arguments: 'z' and 'model'")
     assert _outcome(kf.update, p, zr, radar)[0].__name__ == "ConfigError"
     assert _outcome(kf.predict, s, s.t_ns - 1)[0].__name__ == "TimeError"
 
@@ -214,12 +238,17 @@ class _Counting(KalmanFilter):
         self.handed.append("update")
         return super()._update_general(*args, **kwargs)
 
+    def _step_general(self, *args, **kwargs):
+        self.handed.append("step")
+        return super()._step_general(*args, **kwargs)
+
 
 @needs_c
 @pytest.mark.parametrize("check", [True, False])
 def test_the_common_case_is_taken_in_c(check: bool) -> None:
-    """A cached time step and a model with a compiled twin never reach the general methods,
-    validated or not (unvalidated, a z with inf in it goes through as it is)."""
+    """A cached time step and a model with a compiled twin (for step, its plan's blob of the time
+    step) never reach the general methods, validated or not (unvalidated, a z with inf in it goes
+    through as it is)."""
     pos = CartesianPosition(ndim_state=4, indices=(0, 2), R=[1.0, 1.0])
     f = _Counting(ConstantVelocity(ndim=2, q=0.5), check=check)
     s = _start(4, np.random.default_rng(5))
@@ -232,9 +261,16 @@ def test_the_common_case_is_taken_in_c(check: bool) -> None:
     if not check:
         assert not np.isfinite(f.update(s, np.array([np.inf, 0.0]), pos).state.x).all()
         assert f.handed == []
+    f.step(s, s.t_ns + 100_000_000, np.array([1.0, 2.0]), pos)
+    assert set(f.handed) == {"step"}  # the first step makes the plan and its blob of 0.1 s
+    f.handed.clear()
+    for k in range(1, 20):
+        s = f.step(s, s.t_ns + 100_000_000, np.array([1.0 * k, -1.0 * k]), pos).state
+    assert f.handed == []
     f.update(s, np.array([1.0, 2.0]), pos, R=np.eye(2))
     f.predict(s, s.t_ns + 1)
-    assert f.handed == ["update", "predict"]
+    f.step(s, s.t_ns + 1, np.array([1.0, 2.0]), pos)
+    assert f.handed[:2] == ["update", "predict"] and f.handed[2] == "step"
 
 
 @needs_c
@@ -251,17 +287,21 @@ def test_nothing_is_leaked_or_kept() -> None:
     bad = np.array([np.nan, 0.0])
     FQ = f._transitions[0.1]  # (white-box: the filter's transitions)
     ins = (s, s.x, s.P, s.t_ns, t, p, z, FQ, meas, meas.kernel_spec, meas.R)
-    before = [sys.getrefcount(o) for o in ins]
 
     def calls() -> None:
         f.predict(s, t)
         f.update(p, z, meas)
         f.predict(s, t + 1)  # a second time step: handed on the first time, then cached
         f.update(p, z, meas, R=meas.R)
+        f.step(s, t, z, meas)
+        f.step(s, t, z, meas, R=meas.R)
         _outcome(f.update, p, bad, meas)  # (the errors are test_every_case...'s)
         _outcome(f.predict, s, s.t_ns - 1)
         _outcome(f.predict, s)
 
+    calls()  # the step's plan for meas is made: it holds meas (a key) and meas.R
+    gc.collect()
+    before = [sys.getrefcount(o) for o in ins]
     for _ in range(300):
         calls()
     gc.collect()
@@ -302,5 +342,6 @@ def test_a_copied_or_pickled_filter_is_the_same_filter(how: str) -> None:
             _same_state(p, f.predict(s, t))
             z = meas.h(p.x) + 0.5
             _same(g.update(p, z, meas), f.update(p, z, meas))
+            _same(g.step(s, t, z, meas), f.step(s, t, z, meas))
             bad = np.array([np.nan, 0.0])  # refused where checked, through where not
             _agree(_outcome(g.update, p, bad, meas), _outcome(f.update, p, bad, meas), "a bad z")
