@@ -22,7 +22,6 @@ import copy
 import gc
 import pickle
 import sys
-import tracemalloc
 
 import numpy as np
 import pytest
@@ -36,6 +35,7 @@ from fusion.core.measurement import CartesianPosition
 from fusion.core.motion import ConstantVelocity
 from fusion.core.radar import Radar2D
 from tests.core.test_packed_step import BUILT, MODELS, _filter, _start
+from tests.core.test_single_c import traced_growth
 
 needs_c = pytest.mark.skipif(not single.COMPILED, reason="the C extension was not built")
 
@@ -306,18 +306,7 @@ def test_nothing_is_leaked_or_kept() -> None:
         calls()
     gc.collect()
     assert [sys.getrefcount(o) for o in ins] == before
-    tracemalloc.start()
-    try:
-        for _ in range(300):
-            calls()
-        gc.collect()
-        base, _ = tracemalloc.get_traced_memory()
-        for _ in range(3_000):
-            calls()
-        gc.collect()
-        grown = tracemalloc.get_traced_memory()[0] - base
-    finally:
-        tracemalloc.stop()
+    grown = traced_growth(calls, warm=300, n=3_000)
     assert grown < 20_000, grown
     assert [sys.getrefcount(o) for o in ins] == before
 

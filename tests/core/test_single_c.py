@@ -25,6 +25,7 @@ import sys
 import sysconfig
 import tracemalloc
 import weakref
+from collections.abc import Callable
 
 import numpy as np
 import pytest
@@ -269,6 +270,24 @@ def test_a_blob_too_short_or_the_wrong_sizes_are_shape_not_a_read_past_an_end() 
 
 
 @needs_c
+def traced_growth(calls: Callable[[], None], *, warm: int, n: int) -> int:
+    """Bytes of memory tracemalloc sees held more after n calls() than after `warm` of them
+    (garbage collected before each reading)."""
+    gc.collect()
+    tracemalloc.start()
+    try:
+        for _ in range(warm):
+            calls()
+        gc.collect()
+        base, _ = tracemalloc.get_traced_memory()
+        for _ in range(n):
+            calls()
+        gc.collect()
+        return tracemalloc.get_traced_memory()[0] - base
+    finally:
+        tracemalloc.stop()
+
+
 def test_nothing_is_leaked_or_kept() -> None:
     meas = BUILT["radar_rr"]
     b = _blob("radar_rr", True, 100_000_000)
@@ -310,17 +329,5 @@ def test_nothing_is_leaked_or_kept() -> None:
         single.predict(x, P, FQ, t, True)
         single.predict(bad[:1].repeat(4), P, FQ, t, True)  # NONFINITE
 
-    gc.collect()
-    tracemalloc.start()
-    try:
-        for _ in range(200):
-            calls()
-        gc.collect()
-        base, _ = tracemalloc.get_traced_memory()
-        for _ in range(10_000):
-            calls()
-        gc.collect()
-        grown = tracemalloc.get_traced_memory()[0] - base
-    finally:
-        tracemalloc.stop()
+    grown = traced_growth(calls, warm=200, n=10_000)
     assert grown < 10_000, grown
