@@ -82,14 +82,15 @@ def predict_imm(imm: IMM, xs: Array, Ps: Array, mu: Array, dt: Array, steps: Ste
             m = f.motion
             if isinstance(m, LinearMotionModel):
                 F[j, :U], Fi[j] = by_dt[j][0] if by_dt is not None else m.F(du), per_dt
-            else:
+            elif m.is_linear:
                 F[j, :S], Fi[j] = m.jacobian(X0[j], dts), per_row
+            else:  # f and its Jacobian at the mixed prior, together (terms shared: CoordinatedTurn)
+                Xf[j], F[j, :S] = m.f_and_jacobian(X0[j], dts)
+                Fi[j], use_f[j] = per_row, True
             if m.noise_depends_on_state:
                 Q[j, :S], Qi[j] = m.Q(X0[j], dts), per_row
             else:
                 Q[j, :U], Qi[j] = by_dt[j][1] if by_dt is not None else m.Q(np.zeros((U, n)), du), per_dt
-            if not m.is_linear:
-                Xf[j], use_f[j] = m.f(X0[j], dts), True
     c = np.where(moving[:, None], c, mu)
     pxs, pPs, x, P = predict_many(xs, Ps, sel, X0, P0, F, Fi, Q, Qi, Xf, use_f, c)
     return StackPrediction(pxs, pPs, c, x, P)

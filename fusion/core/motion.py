@@ -52,6 +52,11 @@ class MotionModel(ABC):
     def Q(self, x: Array, dt_s: float | Array) -> Array:
         """Process-noise covariance for a step of dt_s seconds."""
 
+    def f_and_jacobian(self, x: Array, dt_s: float | Array) -> tuple[Array, Array]:
+        """(f(x, dt), df/dx at x) together: the same arrays as the two calls (a model whose two
+        share their terms computes them once: CoordinatedTurn)."""
+        return self.f(x, dt_s), self.jacobian(x, dt_s)
+
     def control(self, dt_s: float | Array) -> Array | None:
         """Control-input matrix B(dt) for x' = f(x) + B u, or None if the model takes no input."""
         return None
@@ -261,6 +266,14 @@ class CoordinatedTurn(MotionModel):
             [px + sw * vx - cw * vy, c * vx - s * vy, py + cw * vx + sw * vy, s * vx + c * vy, w + 0 * dt],
             axis=-1,
         )
+
+    def f_and_jacobian(self, x: Array, dt_s: float | Array) -> tuple[Array, Array]:
+        """f and its Jacobian of a stack from one set of terms (_stack_terms: its sines and cosines
+        once, not once per call)."""
+        st = self._stack_terms(x, dt_s)
+        if st is not None:
+            return ct_f_many(*st[:6]), ct_jacobian_many(*st)
+        return self.f(x, dt_s), self.jacobian(x, dt_s)
 
     def jacobian(self, x: Array, dt_s: float | Array) -> Array:
         st = self._stack_terms(x, dt_s)

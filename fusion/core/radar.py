@@ -78,14 +78,16 @@ class Radar2D(MeasurementModel):
             if self.range_rate:
                 out.append((dx * float(x[self.vel_idx[0]]) + dy * float(x[self.vel_idx[1]])) / r)
             return np.array(out)
-        dx = x[..., self.pos_idx[0]] - self.sensor[0]
-        dy = x[..., self.pos_idx[1]] - self.sensor[1]
-        r = np.hypot(dx, dy)
-        cols = [r, wrap_angle(np.arctan2(dy, dx) - self.heading_rad)]
+        dx = x[..., self.pos_idx[0]] - self._sx
+        dy = x[..., self.pos_idx[1]] - self._sy
+        out = np.empty(dx.shape + (self.ndim_meas,))  # filled column by column (np.stack: ~4 us more)
+        r = out[..., 0]
+        np.hypot(dx, dy, out=r)
+        out[..., 1] = wrap_angle(np.arctan2(dy, dx) - self.heading_rad)
         if self.range_rate:
             vx, vy = x[..., self.vel_idx[0]], x[..., self.vel_idx[1]]
-            cols.append((dx * vx + dy * vy) / r)
-        return np.stack(cols, axis=-1)
+            out[..., 2] = (dx * vx + dy * vy) / r
+        return out
 
     def jacobian(self, x: Array) -> Array:
         ix, iy = self.pos_idx

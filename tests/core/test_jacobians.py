@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from fusion.core.measurement import Radar2D, Radar3D
+from fusion.core.measurement import Radar2D, Radar3D, wrap_angle
 from fusion.core.motion import CoordinatedTurn
 from fusion.models.helix import HelixDoc, HelixExact
 
@@ -191,3 +191,26 @@ def test_helix_jacobian(model: str, state: str, dt: float) -> None:
     x = HELIX_STATES[state]
     Jfd = _fd(lambda s: m.f(s, dt), x)
     _assert_jac(m.jacobian(x, dt), Jfd, 1e-6, f"helix {model} at {state} dt={dt}")
+
+
+@pytest.mark.parametrize("range_rate", [False, True], ids=["range-bearing", "range-rate"])
+def test_radar2d_h_of_a_stack_is_each_rows_numpy_formula(range_rate: bool) -> None:
+    """Radar2D.h of a stack (N, M, n) (the batched gates': tracks by modes) is, row by row, the
+    numpy formula of one state's measurement: range hypot(dx, dy), bearing wrap(arctan2(dy, dx)
+    - heading), range rate (dx vx + dy vy) / r, bit for bit (its columns are filled in place)."""
+    rng = np.random.default_rng(12)
+    X = rng.standard_normal((7, 2, 4)) * [500, 10, 500, 10]
+    X[0, 0, [0, 2]] = [5.0, 6.0 - 1e-3]  # at the sensor's position, nearly: a bearing near the wrap
+    meas = Radar2D(R=[1, 1e-4, 0.25][: 3 if range_rate else 2], range_rate=range_rate, position=(5, 6),
+                   heading_rad=1.0)
+    Z = meas.h(X)
+    assert Z.shape == (7, 2, 3 if range_rate else 2)
+    for i in range(7):
+        for j in range(2):
+            x = X[i, j][None]  # a stack of one: the numpy path
+            dx, dy = x[:, 0] - 5.0, x[:, 2] - 6.0
+            r = np.hypot(dx, dy)
+            want = [r, wrap_angle(np.arctan2(dy, dx) - 1.0)]
+            if range_rate:
+                want.append((dx * x[:, 1] + dy * x[:, 3]) / r)
+            assert np.array_equal(Z[i, j], np.concatenate(want)), f"seed 12, row {i}, mode {j}"

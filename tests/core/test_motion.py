@@ -133,18 +133,40 @@ def test_coordinated_turn_exact_rotation() -> None:
     np.testing.assert_allclose(out, [r, 0.0, r, v, w], atol=1e-12)
 
 
+def _ct_stack(n: int, seed: int) -> tuple[CoordinatedTurn, np.ndarray, np.ndarray]:
+    """A CT model and a stack of n states (omega 0, 1e-8 and ordinary turn rates: the series for
+    tiny |omega dt| and the closed form) with steps dt (n,) from 1 ms to 2.5 s."""
+    rng = np.random.default_rng(seed)
+    x = rng.normal(size=(n, 5)) * [100.0, 10.0, 100.0, 10.0, 0.1]
+    x[::3, 4] = 0.0
+    x[1::4, 4] = 1e-8
+    return CoordinatedTurn(q_accel=0.05, q_turn=0.03), x, rng.choice([1e-3, 0.05, 0.1, 2.5], n)
+
+
 @pytest.mark.parametrize("n", [1, 7, 300], ids=lambda n: f"N{n}")
 def test_coordinated_turn_compiled_stack_equals_numpy_bit_for_bit(n: int) -> None:
     """A stack x (N, 5) with dt (N,) takes fusion.core.compiled_motion's loops; they give the
     numpy formulation's numbers (here through a (1, N, 5) stack, which stays on numpy) exactly,
     the series for tiny |omega dt| included (omega 0, 1e-8, and ordinary turn rates)."""
     seed = 11 + n
-    rng = np.random.default_rng(seed)
-    m = CoordinatedTurn(q_accel=0.05, q_turn=0.03)
-    x = rng.normal(size=(n, 5)) * [100.0, 10.0, 100.0, 10.0, 0.1]
-    x[::3, 4] = 0.0
-    x[1::4, 4] = 1e-8
-    dt = rng.choice([1e-3, 0.05, 0.1, 2.5], n)
+    m, x, dt = _ct_stack(n, seed)
     for got, ref in ((m.f(x, dt), m.f(x[None], dt[None])[0]), (m.jacobian(x, dt), m.jacobian(x[None], dt[None])[0])):
         assert got.shape == ref.shape, f"seed {seed}"
         assert np.array_equal(got, ref), f"seed {seed}: max diff {np.abs(got - ref).max()}"
+
+
+@pytest.mark.parametrize("n", [1, 7, 300], ids=lambda n: f"N{n}")
+def test_f_and_jacobian_equals_the_two_calls_bit_for_bit(n: int) -> None:
+    """f_and_jacobian (what the stacked IMM's predict calls for a nonlinear mode) gives f's and
+    jacobian's arrays exactly: CoordinatedTurn's from one set of terms, on stacks (the compiled
+    loops, the series for tiny |omega dt| included) and on other shapes; any other model by the
+    base class's two calls."""
+    seed = 23 + n
+    m, x, dt = _ct_stack(n, seed)
+    rng = np.random.default_rng(seed + 1)
+    cases = [(m, x, dt), (m, x[None], dt[None]), (m, x[0], float(dt[0])),
+             (ConstantAcceleration(ndim=2, q=0.3), rng.normal(size=(n, 6)), dt)]
+    for model, xi, di in cases:
+        f, J = model.f_and_jacobian(xi, di)
+        assert f.shape == model.f(xi, di).shape and np.array_equal(f, model.f(xi, di)), f"seed {seed}: {model}"
+        assert np.array_equal(J, model.jacobian(xi, di)), f"seed {seed}: {model}"
