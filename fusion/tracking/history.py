@@ -17,13 +17,12 @@ from __future__ import annotations
 
 import bisect
 from collections import Counter
-from collections.abc import Set as AbstractSet
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from fusion.tracking.detection import Detection
-from fusion.tracking.replay import Gates
+from fusion.tracking.replay import Gates, stands
 from fusion.tracking.results import Estimate, ScanAssociations, ScanKey, TrackEvent
 from fusion.tracking.revision_kernel import ALIVE, IDS, REV, SIG, revised, row_signatures
 from fusion.tracking.trackset import Status, TrackSet
@@ -155,10 +154,11 @@ def signatures_of(estimates: list[Estimate]) -> np.ndarray:
                           np.array([_STATUS_CODE[e.status] for e in estimates]))
 
 
-def revise(entry: Entry, prev: Entry | None, new: list[Estimate], kept: AbstractSet[int] = frozenset(),
+def revise(entry: Entry, prev: Entry | None, new: list[Estimate], kept: np.ndarray = _NO_IDS,
            sigs: np.ndarray | None = None) -> list[Estimate]:
-    """The estimates to report for a scan run (again): see the module docstring. `kept`: tracks
-    of a partial re-run (fusion.tracking.replay) whose stored estimates stand as they were; `sigs`:
+    """The estimates to report for a scan run (again): see the module docstring. `kept`: the ids
+    (int64, any order) of the tracks of a partial re-run (fusion.tracking.replay) whose stored
+    estimates stand as they were; `sigs`:
     the estimates' signatures if known (ScanOutcome.signatures), else signatures_of(new).
     Every track the previous run reported ends up in entry.emitted: produced again (unchanged:
     as it was; changed: revision + 1), standing (kept) or retracted (revision + 1 if it was
@@ -169,8 +169,7 @@ def revise(entry: Entry, prev: Entry | None, new: list[Estimate], kept: Abstract
     produced = np.empty((2, n), dtype=np.int64)  # track ids, signatures
     produced[0] = np.fromiter((e.track_id for e in new), dtype=np.int64, count=n)
     produced[1] = signatures_of(new) if sigs is None else sigs
-    kept_ids = np.fromiter(kept, dtype=np.int64, count=len(kept)) if kept else _NO_IDS
-    same, rev, gone, table = revised(old.table, produced, kept_ids)
+    same, rev, gone, table = revised(old.table, produced, kept)
     entry.emitted = Emitted(table)
     out = [e.with_revision(r) for e, r, s in zip(new, rev.tolist(), same.tolist(), strict=True) if not s]
     t_ns, sensor_id = entry.key
@@ -178,14 +177,14 @@ def revise(entry: Entry, prev: Entry | None, new: list[Estimate], kept: Abstract
     return out
 
 
-def revise_events(entry: Entry, prev: Entry | None, new: list[TrackEvent], kept: AbstractSet[int] = frozenset()
+def revise_events(entry: Entry, prev: Entry | None, new: list[TrackEvent], kept: np.ndarray = _NO_IDS
                   ) -> list[TrackEvent]:
     """The events to report for a scan run (again): new ones, and withdrawals of vanished ones;
-    the stored events of `kept` tracks stand (a partial re-run)."""
+    the stored events of the tracks `kept` (ids, sorted: Partial.kept) stand (a partial re-run)."""
     old = prev.events if prev else {}
     entry.events = {ev.key: ev for ev in new}
-    if kept:
-        entry.events.update({k: ev for k, ev in old.items() if ev.track_id in kept})
+    if kept.size and old:
+        entry.events.update({k: ev for (k, ev), s in zip(old.items(), stands(old.values(), kept), strict=True) if s})
     out = [ev for ev in new if ev.key not in old]
     out.extend(old[k].withdrawn() for k in sorted(old) if k not in entry.events)
     return out

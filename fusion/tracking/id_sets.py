@@ -12,7 +12,11 @@ from numba import njit
 
 @njit(cache=True, fastmath=False)
 def _member(values: np.ndarray, of: np.ndarray) -> np.ndarray:
-    srt = np.sort(of)
+    return _in_sorted(values, np.sort(of))
+
+
+@njit(cache=True, fastmath=False)
+def _in_sorted(values: np.ndarray, srt: np.ndarray) -> np.ndarray:
     n = srt.shape[0]
     out = np.zeros(values.shape[0], dtype=np.bool_)
     for i in range(values.shape[0]):
@@ -37,6 +41,13 @@ def member(values: np.ndarray, of: np.ndarray) -> np.ndarray:
     if of.size == 0 or values.size == 0:
         return np.zeros(values.shape, dtype=bool)
     return _member(np.ascontiguousarray(values, dtype=np.int64), np.ascontiguousarray(of, dtype=np.int64))
+
+
+def member_sorted(values: np.ndarray, srt: np.ndarray) -> np.ndarray:
+    """member(values, srt) for `srt` sorted ascending already (int64): the searches alone."""
+    if srt.size == 0 or values.size == 0:
+        return np.zeros(values.shape, dtype=bool)
+    return _in_sorted(np.ascontiguousarray(values, dtype=np.int64), srt)
 
 
 @njit(cache=True, fastmath=False)
@@ -97,38 +108,59 @@ def _reached(pi: np.ndarray, pj: np.ndarray, n_i: int, n_j: int, hot_i: np.ndarr
 
 
 @njit(cache=True, fastmath=False)
-def _dense_compiled(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    u = np.unique(values)
-    return u, np.searchsorted(u, values)
-
-
-NUMPY_SORT_FROM = 512  # pairs: from about here numpy's sort beats the compiled one (12 us for 512 ids; 21 / 62 at 1024)
-_NO_IDS = np.zeros(0, dtype=np.int64)
+def _dense(sorted_ids: np.ndarray, order: np.ndarray, extra: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """Each value's dense index: its row k in ids (sorted_ids = ids[order]) if there, else
+    len(ids) + its position in `extra` (sorted): one binary search each, no sort."""
+    n = sorted_ids.shape[0]
+    out = np.empty(values.shape[0], dtype=np.int64)
+    for i in range(values.shape[0]):
+        k = np.searchsorted(sorted_ids, values[i])
+        if k < n and sorted_ids[k] == values[i]:
+            out[i] = order[k]
+        else:
+            e = np.searchsorted(extra, values[i])
+            if e >= extra.shape[0] or extra[e] != values[i]:
+                raise ValueError("rerun_sets: a pair's track is neither in ts_ids nor a seed")
+            out[i] = n + e
+    return out
 
 
 @njit(cache=True, fastmath=False)
 def _rerun_sets(old_ids: np.ndarray, old_seqs: np.ndarray, seed_ids: np.ndarray, add_ids: np.ndarray,
                 add_seqs: np.ndarray, seed_seqs: np.ndarray, ts_ids: np.ndarray, seqs: np.ndarray,
-                via_ids: np.ndarray, via_seqs: np.ndarray,
-                uid: np.ndarray, inv_i: np.ndarray, useq: np.ndarray, inv_j: np.ndarray) -> tuple[np.ndarray, ...]:
+                via_ids: np.ndarray, via_seqs: np.ndarray, sorted_ts: np.ndarray, order: np.ndarray
+                ) -> tuple[np.ndarray, ...]:
     keep = ~_member(old_ids, seed_ids)
     new_ids = np.concatenate((old_ids[keep], add_ids))
     new_seqs = np.concatenate((old_seqs[keep], add_seqs))
-    # the reach: what the seeds connect to over the stored run's pairs `via` and the added ones
+    # the reach: what the seeds connect to over the stored run's pairs `via` and the added ones,
+    # over dense indices: a track's row in ts_ids (then the seeds it lacks: the gone tracks), a
+    # detection's position in seqs
     E = via_ids.size + add_ids.size
-    if uid.size == 0:
-        uid, inv_i = _dense_compiled(np.concatenate((via_ids, add_ids, seed_ids)))
-    if useq.size == 0:
-        useq, inv_j = _dense_compiled(np.concatenate((via_seqs, add_seqs, seed_seqs)))
-    seen_i, seen_j = _reached(inv_i[:E], inv_j[:E], uid.size, useq.size, inv_i[E:], inv_j[E:])
-    rows = np.flatnonzero(_member(ts_ids, uid[seen_i]))
-    js = np.flatnonzero(_member(seqs, useq[seen_j]))
+    n_ts = ts_ids.size
+    lacks = np.zeros(seed_ids.size, dtype=np.bool_)
+    for k in range(seed_ids.size):
+        at = np.searchsorted(sorted_ts, seed_ids[k])
+        lacks[k] = not (at < n_ts and sorted_ts[at] == seed_ids[k])
+    extra = np.unique(seed_ids[lacks])
+    inv_i = _dense(sorted_ts, order, extra, np.concatenate((via_ids, add_ids, seed_ids)))
+    all_seqs = np.concatenate((via_seqs, add_seqs, seed_seqs))
+    inv_j = np.searchsorted(seqs, all_seqs)
+    for k in range(inv_j.size):
+        if inv_j[k] >= seqs.size or seqs[inv_j[k]] != all_seqs[k]:
+            raise ValueError("rerun_sets: a pair's detection is not one of seqs")
+    seen_i, seen_j = _reached(inv_i[:E], inv_j[:E], n_ts + extra.size, seqs.size, inv_i[E:], inv_j[E:])
+    rows = np.flatnonzero(seen_i[:n_ts])
+    for k in range(1, seqs.size):  # a seq's node is its first position: its equal seqs (other epochs) too
+        if seqs[k] == seqs[k - 1] and seen_j[k - 1]:
+            seen_j[k] = True
+    js = np.flatnonzero(seen_j)
     # the new pairs inside the reach (both ends), as (row of the part, detection of the part), by (detection, row)
     sub = ts_ids[rows]
     sub_seqs = seqs[js]
-    order = np.argsort(sub, kind="mergesort")
+    order_sub = np.argsort(sub, kind="mergesort")
     inside = np.flatnonzero(_member(new_ids, sub) & _member(new_seqs, sub_seqs))
-    i = order[np.searchsorted(sub[order], new_ids[inside])]
+    i = order_sub[np.searchsorted(sub[order_sub], new_ids[inside])]
     j = np.searchsorted(sub_seqs, new_seqs[inside])
     o = np.argsort(j * (rows.shape[0] + 1) + i, kind="mergesort")
     return new_ids, new_seqs, rows, js, i[o], j[o]
@@ -149,18 +181,18 @@ def rerun_sets(old_ids: np.ndarray, old_seqs: np.ndarray, seed_ids: np.ndarray, 
                          and the added ones (a breadth-first search from the seeds);
       ti, mj:            the new pairs with both ends inside the reach as indices into rows and
                          js, sorted by (mj, ti), as fusion.core.association.coarse_pairs orders them.
-    `seqs` is sorted ascending."""
+    `seqs` is sorted ascending and holds every seq of the pairs and seeds (the scan's detections);
+    every track id of the pairs and seeds is one of ts_ids (unique) or of seed_ids (a gone track
+    is a seed). A seq is one node of the reach: equal seqs (a sensor's two epochs) are reached
+    together. The tracks and detections are indexed by their rows in ts_ids and first positions in
+    seqs (one binary search each, over ts_ids sorted once here), not by sorting the pairs' ids
+    and seqs for their unique values (two np.unique calls of up to thousands: ~0.1 ms a re-run
+    at 667 targets)."""
     c = np.ascontiguousarray
     via_ids, via_seqs = (old_ids, old_seqs) if via is None else via
     old_ids, old_seqs, seed_ids, add_ids, add_seqs, seed_seqs, ts_ids, seqs, via_ids, via_seqs = (
         c(a, dtype=np.int64) for a in (old_ids, old_seqs, seed_ids, add_ids, add_seqs, seed_seqs, ts_ids, seqs,
                                        via_ids, via_seqs))
-    # the ids and seqs as dense indices (their sorted unique values, and each one's index in them):
-    # numpy's sort for many pairs; for fewer (numpy's call costs more than the compiled sort of a
-    # hundred ids, its sort far less at a thousand) the compiled call makes them
-    uid = inv_i = useq = inv_j = _NO_IDS
-    if via_ids.size + add_ids.size >= NUMPY_SORT_FROM:
-        uid, inv_i = np.unique(np.concatenate((via_ids, add_ids, seed_ids)), return_inverse=True)
-        useq, inv_j = np.unique(np.concatenate((via_seqs, add_seqs, seed_seqs)), return_inverse=True)
+    order = np.argsort(ts_ids, kind="stable")
     return _rerun_sets(old_ids, old_seqs, seed_ids, add_ids, add_seqs, seed_seqs, ts_ids, seqs, via_ids, via_seqs,
-                       uid, c(inv_i, np.int64), useq, c(inv_j, np.int64))
+                       ts_ids[order], order)

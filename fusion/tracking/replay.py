@@ -35,6 +35,7 @@ pair, which agrees with the batched math to 1e-12, not bit for bit).
 from __future__ import annotations
 
 from collections import Counter
+from collections.abc import Iterable
 from dataclasses import dataclass
 
 import numpy as np
@@ -43,8 +44,8 @@ from fusion.core.association import coarse_pairs
 from fusion.core.checks import Array
 from fusion.tracking.association_kernels import counted
 from fusion.tracking.detection import Detection, seqs_of
-from fusion.tracking.id_sets import member, rerun_sets
-from fusion.tracking.results import OUTCOME_CODE, EventKind, Outcome, ScanAssociations, ScanKey
+from fusion.tracking.id_sets import member, member_sorted, rerun_sets
+from fusion.tracking.results import OUTCOME_CODE, EventKind, Outcome, ScanAssociations, ScanKey, TrackEvent
 from fusion.tracking.scan import Coarse, ScanContext, ScanOutcome, Tally, measured_points, run_scan
 from fusion.tracking.splice import after_in_place, assembled_after, spliced
 from fusion.tracking.trackset import TrackSet
@@ -91,7 +92,7 @@ class Partial:
     events stand, its gates, and the hint for the next scan."""
 
     outcome: ScanOutcome
-    kept: set[int]
+    kept: np.ndarray  # the ids of the tracks whose stored estimates and events stand, sorted
     gates: Gates
     hint: Hint
     rerun_tracks: int
@@ -109,12 +110,12 @@ def gates_of(ts: TrackSet, key: ScanKey, dets: tuple[Detection, ...], ctx: ScanC
     return Gates(ts.ids[ci], seqs[cj], mpos, mvar, seqs)
 
 
-def gates_of_run(ts: TrackSet, dets: tuple[Detection, ...], out: ScanOutcome) -> Gates | None:
-    """The gates of a whole run of a scan on ts, from what run_scan returned."""
+def gates_of_run(ts: TrackSet, seqs: np.ndarray, out: ScanOutcome) -> Gates | None:
+    """The gates of a whole run of a scan on ts, from what run_scan returned (`seqs`: its
+    detections' seqs, in their order)."""
     if out.coarse is None or out.variances is None:
         return None
     ci, cj = out.coarse
-    seqs = seqs_of(dets)
     return Gates(ts.ids[ci], seqs[cj], out.positions, out.variances, seqs)
 
 
@@ -160,6 +161,13 @@ def _fine_pairs(assoc: ScanAssociations) -> tuple[np.ndarray, np.ndarray]:
     return assoc.gated, np.repeat(assoc.seq, np.diff(assoc.gated_at))
 
 
+def stands(events: Iterable[TrackEvent], kept: np.ndarray) -> list[bool]:
+    """Whether each event is of one of the tracks `kept` (Partial.kept: ids, sorted): a binary
+    search each, not a set of the hundreds of ids a partial re-run keeps built for the few
+    events to look up."""
+    return member_sorted(np.fromiter((ev.track_id for ev in events), dtype=np.int64), kept).tolist()
+
+
 _COUNTED_CODES = (OUTCOME_CODE[Outcome.UPDATED], OUTCOME_CODE[Outcome.BORN])  # association_kernels.counted's
 _NO_SIGNATURES = np.empty(0, dtype=np.int64)
 
@@ -182,10 +190,11 @@ def _tally_of(assoc: ScanAssociations, rows: np.ndarray, events: list) -> Counte
 
 
 def rerun(ts: TrackSet, key: ScanKey, dets: tuple[Detection, ...], ctx: ScanContext, old: Stored,
-          old_events: list, hint: Hint | None = None) -> Partial | None:
+          old_events: list, hint: Hint | None = None, seqs: np.ndarray | None = None) -> Partial | None:
     """Scan `key` run again on `ts` with `dets` (sorted by seq), reusing `old` where the late data
     cannot reach; None where the whole scan must run (module docstring). `old_events`: the events
-    the stored run reported; `hint`: the previous scan's partial re-run, if any."""
+    the stored run reported; `hint`: the previous scan's partial re-run, if any; `seqs`: the seqs
+    of `dets`, if known (fusion.tracking.step_order.merged_seqs)."""
     if old.tally[Tally.BIRTHS_REFUSED_CAPACITY] or old.tally[Tally.NUMERICAL_SKIPS]:
         return None  # the old run's counts are not per component: run the whole scan
     old_gates = old.gates if old.gates is not None else gates_of(old.before, key, old.dets, ctx)
@@ -193,7 +202,7 @@ def rerun(ts: TrackSet, key: ScanKey, dets: tuple[Detection, ...], ctx: ScanCont
     if len(dets) == len(old.dets):  # dets hold old.dets: the same detections
         seqs, old_j = old_seqs, np.arange(len(dets))
     else:
-        seqs = seqs_of(dets)
+        seqs = seqs_of(dets) if seqs is None else seqs
         old_j = np.searchsorted(seqs, old_seqs)  # both sorted by seq
     new = np.ones(len(dets), dtype=bool)
     new[old_j] = False
@@ -203,7 +212,7 @@ def rerun(ts: TrackSet, key: ScanKey, dets: tuple[Detection, ...], ctx: ScanCont
     if not (changed.any() or gone.size or new.any()):  # nothing changed: the stored run stands
         if not np.array_equal(ts.ids, old.before.ids):
             return None  # the same rows in another order: the whole scan orders its output by them
-        kept = {int(i) for i in ts.ids.tolist()} | {int(i) for i in old.after.ids.tolist()}
+        kept = np.union1d(ts.ids, old.after.ids)
         return Partial(ScanOutcome(old.after, [], [], old.associations, old.tally, old_gates.mpos,
                                    signatures=_NO_SIGNATURES), kept,
                        old_gates, Hint(old.after, np.zeros(0, np.int64)), 0, 0)
@@ -216,7 +225,7 @@ def rerun(ts: TrackSet, key: ScanKey, dets: tuple[Detection, ...], ctx: ScanCont
     if rows.size == len(ts) and js.size == len(dets):
         return None  # everything is reached: the whole scan is the same work
     sub_dets = tuple(dets[j] for j in js.tolist())
-    sub = run_scan(ts.take(rows), key, sub_dets, ctx, Coarse(ti, mj, points[0][js], points[1][js])) \
+    sub = run_scan(ts.take(rows), key, sub_dets, ctx, Coarse(ti, mj, points[0][js], points[1][js]), seqs[js]) \
         if rows.size or js.size else None
     if sub is not None and (sub.tally[Tally.BIRTHS_REFUSED_CAPACITY] or sub.tally[Tally.NUMERICAL_SKIPS]):
         return None
@@ -235,9 +244,11 @@ def rerun(ts: TrackSet, key: ScanKey, dets: tuple[Detection, ...], ctx: ScanCont
     if after is None:
         after = assembled_after(ts, rows, None if sub is None else sub.after, A, seqs[js], born_then)
     touched = np.unique(np.concatenate([ts.ids[rows]] + ([] if sub is None else [sub.after.ids])))
-    kept = set(ts.ids.tolist()).union(kept_births.tolist()).difference(touched.tolist())
+    kept = np.concatenate([ts.ids, kept_births])
+    kept = np.sort(kept[~member(kept, touched)])
     # the stored tally less what the re-run part counted in the stored run, plus what it counts now
-    tally = old.tally - _tally_of(old.associations, gone_k, [ev for ev in old_events if ev.track_id not in kept])
+    gone_events = [ev for ev, s in zip(old_events, stands(old_events, kept), strict=True) if not s]
+    tally = old.tally - _tally_of(old.associations, gone_k, gone_events)
     assoc, estimates, events, sigs = old.associations, [], [], _NO_SIGNATURES
     if sub is not None:
         tally.update(sub.tally)

@@ -102,9 +102,10 @@ class Coarse:
 
 
 def run_scan(ts: TrackSet, key: ScanKey, dets: tuple[Detection, ...], ctx: ScanContext,
-             coarse: Coarse | None = None) -> ScanOutcome:
+             coarse: Coarse | None = None, det_seqs: np.ndarray | None = None) -> ScanOutcome:
     """The scan `key` (see the module docstring); `dets` sorted by seq, R resolved. `coarse`:
-    the scan's coarse gate if the caller knows it (a partial re-run: fusion.tracking.replay)."""
+    the scan's coarse gate if the caller knows it (a partial re-run: fusion.tracking.replay);
+    `det_seqs`: the seqs of `dets`, if known (fusion.tracking.step_order.merged_seqs)."""
     t_ns, sensor_id = key
     sm = ctx.sensors[sensor_id]
     meas = _measured(sm, dets)
@@ -125,7 +126,8 @@ def run_scan(ts: TrackSet, key: ScanKey, dets: tuple[Detection, ...], ctx: ScanC
     hits = ts.hits[ti] + 1
     confirm = ctx.lifecycle.confirms(ts.status[ti], hits, ts.chances[ti] + 1)
     status = np.where(confirm, np.int8(Status.CONFIRMED), ts.status[ti]).astype(np.int8)
-    det_seqs = seqs_of(dets)
+    if det_seqs is None:
+        det_seqs = seqs_of(dets)
     seqs = det_seqs[mj]
     # what an update changes in a row (its id, birth, origin and counters stay)
     changes = {"status": status, "hits": hits, "t_ns": np.full(ti.size, t_ns, np.int64),

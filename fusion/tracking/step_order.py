@@ -29,6 +29,20 @@ def merged(prev: Entry | None, arrived: list[Detection] | None) -> tuple[Detecti
     return tuple(out)
 
 
+def merged_seqs(prev: Entry | None, arrived: list[Detection] | None, dets: tuple[Detection, ...]) -> np.ndarray:
+    """The seqs of `dets` (= merged(prev, arrived)), in their order: the stored scan's seqs where
+    its gates hold them (Gates.det_seqs) with the arrived ones put in place as `merged` puts them
+    (after an equal seq), instead of every detection of the scan read again (a late measurement
+    joins a scan of hundreds, and a partial re-run needs the seqs of the whole scan)."""
+    base = None if prev is None or prev.gates is None else prev.gates.det_seqs
+    if base is None:
+        return seqs_of(dets)
+    if not arrived:
+        return base
+    new = np.sort(seqs_of(arrived), kind="stable")
+    return np.insert(base, np.searchsorted(base, new, side="right"), new)
+
+
 def withdrawals_first(events: list[TrackEvent]) -> tuple[TrackEvent, ...]:
     """A step's events with its withdrawals first (each kind in its order). Two scans of the same
     time (two sensors) can hand one event over: a replay runs the first again, which now confirms

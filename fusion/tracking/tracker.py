@@ -47,8 +47,10 @@ from fusion.tracking.results import (
     TrackEvent,
 )
 from fusion.tracking.scan import ScanContext, Tally, run_scan
-from fusion.tracking.step_order import merged, new_points, withdrawals_first
+from fusion.tracking.step_order import merged, merged_seqs, new_points, withdrawals_first
 from fusion.tracking.trackset import Layout, Rows, Status, Track, TrackSet
+
+_NO_IDS = np.empty(0, dtype=np.int64)  # no tracks kept: a scan run whole
 
 
 class Tracker:
@@ -193,11 +195,12 @@ class Tracker:
             prev = rw.old.get(key)
             arrived = scans.get(key)
             dets = merged(prev, arrived)
-            part = self._rerun(ts, key, dets, prev, rw.after.get(key), hint)
-            out = part.outcome if part is not None else run_scan(ts, key, dets, self.ctx)
-            kept = part.kept if part is not None else frozenset()
+            seqs = merged_seqs(prev, arrived, dets)
+            part = self._rerun(ts, key, dets, seqs, prev, rw.after.get(key), hint)
+            out = part.outcome if part is not None else run_scan(ts, key, dets, self.ctx, det_seqs=seqs)
+            kept = part.kept if part is not None else _NO_IDS
             hint = part.hint if part is not None else None
-            gates = part.gates if part is not None else gates_of_run(ts, dets, out)
+            gates = part.gates if part is not None else gates_of_run(ts, seqs, out)
             if arrived:
                 points.append(new_points(key, dets, arrived, prev is not None, out.positions,
                                          None if gates is None else gates.det_seqs))
@@ -212,14 +215,14 @@ class Tracker:
         return StepResult(tuple(estimates), withdrawals_first(events), tuple(refused), len(accepted), replays,
                           tuple(assoc), tuple(points), self.horizon_ns)
 
-    def _rerun(self, ts: TrackSet, key: ScanKey, dets: tuple[Detection, ...], prev: Entry | None,
+    def _rerun(self, ts: TrackSet, key: ScanKey, dets: tuple[Detection, ...], seqs: np.ndarray, prev: Entry | None,
                after: TrackSet | None, hint: Hint | None) -> Partial | None:
         """A scan run before, run again in part (fusion.tracking.replay), or None: run it whole
         (a new scan; full replay chosen; control inputs, which move every track's prediction)."""
         if prev is None or after is None or not self.selective or self.inputs is not None:
             return None
         old = Stored(prev.before, after, prev.dets, prev.associations, prev.tally, prev.gates)
-        return rerun(ts, key, dets, self.ctx, old, list(prev.events.values()), hint)
+        return rerun(ts, key, dets, self.ctx, old, list(prev.events.values()), hint, seqs)
 
     def _admit(self, items: Iterable[Detection | ControlInput]
                ) -> tuple[list[Detection], list[ControlInput], list[Refusal]]:

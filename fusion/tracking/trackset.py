@@ -26,6 +26,7 @@ from fusion.core.gaussian import GaussianState
 from fusion.core.imm import IMMState
 from fusion.tracking.cv_extrapolation import extrapolated
 from fusion.tracking.id_sets import member, positions
+from fusion.tracking.row_bits import still_same
 
 
 class Status(IntEnum):
@@ -258,18 +259,11 @@ class TrackSet:
                 out[r] = not ok or any(a[r].tobytes() != b[o].tobytes() for a, b in cols)
             return out
         same = found.copy()
-        for f in _COMPARE_ORDER:
+        rows_, at_ = rows.astype(np.int64, copy=False), at.astype(np.int64, copy=False)
+        for f in _COMPARE_ORDER:  # bits, not values (fusion.tracking.row_bits)
             a = getattr(self, f)
-            if a is None:
-                continue
-            if not same.any():
-                break
-            a, b = a[rows[same]], getattr(old, f)[at[same]]
-            a2, b2 = a.reshape(a.shape[0], -1), b.reshape(b.shape[0], -1)
-            if a2.dtype.kind == "f":  # bits, not values: -0.0 and 0.0 differ, NaN equals itself
-                a2, b2 = a2.view(np.int64), b2.view(np.int64)
-            eq = (a2 == b2).all(axis=1)
-            same[np.flatnonzero(same)[~eq]] = False
+            if a is not None:
+                still_same(a, getattr(old, f), rows_, at_, same)
         out = np.zeros(n, dtype=bool)
         out[rows] = ~same
         return out

@@ -64,7 +64,7 @@ def test_revise_equals_the_dict_of_revisions(seed: int) -> None:
             new = [new[i] for i in rng.permutation(len(new))]  # the order given is kept
         kept = {int(t) for t in ids[rng.random(len(ids)) < 0.2]} if rng.random() < 0.5 else set()
         entry = Entry(KEY, (), None)  # type: ignore[arg-type]
-        got = revise(entry, prev, new, kept)
+        got = revise(entry, prev, new, np.array(sorted(kept), dtype=np.int64))
         ref_new: dict = {}
         want = _reference(ref_new, ref, new, kept)
         assert _same(got, want)

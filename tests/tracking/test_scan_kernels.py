@@ -13,7 +13,7 @@ from fusion.core.compiled_stack import innovate_many
 from fusion.core.imm_stack import StepCache, predict_imm
 from fusion.core.modes import Mode, build_imm
 from fusion.tracking.gating import Measured
-from fusion.tracking.id_sets import NUMPY_SORT_FROM, member, rerun_sets
+from fusion.tracking.id_sets import member, rerun_sets
 from fusion.tracking.lifecycle_kernel import COASTED, COVARIANCE, MISSES, NOT_CONFIRMED, verdicts
 from fusion.tracking.trackset import Layout, Rows, TrackSet
 
@@ -163,20 +163,25 @@ def _rerun_sets_reference(old_ids, old_seqs, ts_ids, changed, gone, add_ids, add
     return new_ids, nseqs, rows, js, i[o], j[o]
 
 
+@pytest.mark.parametrize("equal", [False, True], ids=["unique-seqs", "equal-seqs"])
 @pytest.mark.parametrize("fine", [False, True], ids=["via-coarse", "via-fine"])
 @pytest.mark.parametrize("size", [(40, 50, 70, 8), (700, 800, 1500, 60)], ids=["few-pairs", "many-pairs"])
 @pytest.mark.parametrize("seed", range(12))
-def test_rerun_sets_are_the_steps_they_replaced(seed: int, size: tuple[int, int, int, int], fine: bool) -> None:
+def test_rerun_sets_are_the_steps_they_replaced(seed: int, size: tuple[int, int, int, int], fine: bool,
+                                                equal: bool) -> None:
     """A stored run's pairs over T tracks and D detections (up to E pairs; the 5 last detections
     new), some tracks changed, some gone, new detections, up to A added pairs of the changed
-    tracks and new detections. Few pairs: rerun_sets sorts the ids compiled; many (beyond
-    id_sets.NUMPY_SORT_FROM): with numpy's sort. The reach follows the stored coarse pairs, or
+    tracks and new detections: few pairs (a partial re-run at 100 targets) and many (at ~700).
+    The reach follows the stored coarse pairs, or
     (`fine`) a subset of them, as the stored run's fine pairs are: then some new pairs of
-    reached tracks end outside the reach, and are not the part's."""
+    reached tracks end outside the reach, and are not the part's. `equal`: some seqs twice (a
+    sensor restarted: another epoch's measurements with the same seqs)."""
     T, D, E_max, A_max = size
     rng = np.random.default_rng(seed)
     before = rng.choice(2**62, T, replace=False).astype(np.int64)
     seqs = np.sort(rng.choice(10**6, D, replace=False)).astype(np.int64)
+    if equal:
+        seqs = np.sort(np.concatenate([seqs[: D - D // 4], seqs[: D // 4]]))
     E = int(rng.integers(E_max // 2 if T > 100 else 0, E_max))
     old_ids, old_seqs = before[rng.integers(0, T, E)], seqs[rng.integers(0, D - 5, E)]  # the last 5 detections new
     pairs = np.unique(np.stack([old_ids, old_seqs], axis=1), axis=0)
@@ -199,8 +204,6 @@ def test_rerun_sets_are_the_steps_they_replaced(seed: int, size: tuple[int, int,
     got = rerun_sets(old_ids, old_seqs, drop, add_ids, add_seqs, seqs[new], ts_ids, seqs, via=via)
     want = _rerun_sets_reference(old_ids, old_seqs, ts_ids, changed, before[gone_mask], add_ids, add_seqs, seqs[new],
                                  seqs, via)
-    if not fine:
-        assert (old_ids.size + add_ids.size >= NUMPY_SORT_FROM) == (T > 100)
     assert _bits(*got) == _bits(*(np.asarray(w).astype(np.int64) for w in want))
 
 
@@ -254,3 +257,15 @@ def test_one_dimension_scan_is_stacked_as_the_grouped_one() -> None:
     mixed = Measured.of((*z, rng.normal(size=3)), (*R, _spd(rng, 3)), (None,) * 8)  # type: ignore[arg-type]
     assert list(one.Z) == [2] and _bits(one.Z[2], one.Rs[2], one.at) == _bits(mixed.Z[2], mixed.Rs[2], mixed.at[:7])
     np.testing.assert_array_equal(one.dims, mixed.dims[:7])
+
+
+def test_rerun_sets_refuses_pairs_outside_its_tracks_and_detections() -> None:
+    """A pair whose track is neither in ts_ids nor a seed, or whose detection is not in seqs,
+    has no dense index: refused, not given another's."""
+    ts_ids, seqs, none = np.array([10, 20]), np.array([1, 2]), np.zeros(0, np.int64)
+    ok = rerun_sets(np.array([10, 30]), np.array([1, 2]), np.array([30]), none, none, none, ts_ids, seqs)
+    assert ok[2].tolist() == [] and ok[3].tolist() == [1]  # gone track 30 (a seed) reaches detection 2 alone
+    with pytest.raises(ValueError, match="track"):
+        rerun_sets(np.array([10, 40]), np.array([1, 2]), np.array([10]), none, none, none, ts_ids, seqs)
+    with pytest.raises(ValueError, match="detection"):
+        rerun_sets(np.array([10, 20]), np.array([1, 5]), np.array([10]), none, none, none, ts_ids, seqs)

@@ -84,7 +84,7 @@ def test_revise_keeps_the_stored_estimates_of_kept_tracks_and_retracts_the_other
     prev = Entry((5, "s"), (), None)  # type: ignore[arg-type]
     revise(prev, None, [_est(1, 1.0), _est(2, 2.0), _est(3, 3.0)])
     entry = Entry((5, "s"), (), None)  # type: ignore[arg-type]
-    out = revise(entry, prev, [_est(1, 1.5)], kept={2, 7})
+    out = revise(entry, prev, [_est(1, 1.5)], kept=np.array([2, 7]))
     assert [(e.track_id, e.revision, e.status) for e in out] == [(1, 1, "confirmed"), (3, 1, "retracted")]
     assert entry.emitted[2] == prev.emitted[2]
     assert entry.emitted[3][0] == 1 and not entry.emitted[3][2]
