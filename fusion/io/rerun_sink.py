@@ -31,7 +31,8 @@ z = 0 plane; track labels are fusion.io.labels.short_id of the id):
   record/estimates       every estimate and retraction: track, label, sensor, seq, status, revision,
                          x, std = sqrt(diag P), nis, nis_dof, nees, nees_dof, error, target (what
                          `fusion inspect` reads; NaN where a value does not apply)
-  record/associations    every accepted measurement: sensor, seq, outcome, track label, gated labels, nis
+  record/associations    every accepted measurement's association, and again whenever a replay changes it
+                         (StepResult.associations): sensor, seq, outcome, track label, gated labels, nis
   record/truth           every true state logged: target, x (in the tracker's layout, float64)
   record/events          births, confirmations, coasting, deletions (with reason), withdrawals,
                          replays and refusals: kind, track, label, reason, retracted, detail

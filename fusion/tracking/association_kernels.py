@@ -105,3 +105,44 @@ def counted(outcome: np.ndarray, at: np.ndarray, rows: np.ndarray, updated: int,
         if outcome[j] == born:
             n_born += 1
     return n_upd, n_una, n_born
+
+
+@njit(cache=True, fastmath=False)
+def changed(old_pos: np.ndarray, s_outcome: np.ndarray, s_track: np.ndarray, s_nis: np.ndarray, s_at: np.ndarray,
+            s_gated: np.ndarray, outcome: np.ndarray, track: np.ndarray, nis: np.ndarray, at: np.ndarray,
+            gated: np.ndarray) -> np.ndarray:
+    """Which rows of a scan's associations (outcome, track, nis, at, gated) differ from the stored
+    run's (s_*), whose row k is at position old_pos[k]: another outcome, track, NIS (bits: a NaN
+    equals itself) or gated tracks; a row no stored row is at (a new measurement) differs."""
+    n = outcome.shape[0]
+    diff = np.ones(n, dtype=np.bool_)
+    s_bits, bits = s_nis.view(np.int64), nis.view(np.int64)
+    for k in range(old_pos.shape[0]):
+        j = old_pos[k]
+        same = (outcome[j] == s_outcome[k] and track[j] == s_track[k] and bits[j] == s_bits[k]
+                and at[j + 1] - at[j] == s_at[k + 1] - s_at[k])
+        if same:
+            a, b = at[j], s_at[k]
+            for g in range(at[j + 1] - a):
+                if gated[a + g] != s_gated[b + g]:
+                    same = False
+                    break
+        diff[j] = not same
+    return diff
+
+
+@njit(cache=True, fastmath=False)
+def taken(rows: np.ndarray, seq: np.ndarray, outcome: np.ndarray, track: np.ndarray, nis: np.ndarray, at: np.ndarray,
+          gated: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The rows `rows` (ascending) of a scan's associations: (seq, outcome, track_id, nis,
+    gated_at, gated)."""
+    m = rows.shape[0]
+    sub_at = np.zeros(m + 1, dtype=np.int64)
+    for i in range(m):
+        j = rows[i]
+        sub_at[i + 1] = sub_at[i] + at[j + 1] - at[j]
+    sub_gated = np.empty(sub_at[m], dtype=np.int64)
+    for i in range(m):
+        j = rows[i]
+        sub_gated[sub_at[i]:sub_at[i + 1]] = gated[at[j]:at[j + 1]]
+    return seq[rows], outcome[rows], track[rows], nis[rows], sub_at, sub_gated

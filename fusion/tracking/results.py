@@ -293,7 +293,9 @@ class StepResult:
     refused: tuple[Refusal, ...]
     applied: int
     replays: tuple[Replay, ...]
-    associations: tuple[ScanAssociations, ...]  # one block per scan run (again)
+    # one block per scan run (again): a first run's every association; a run again's new and changed
+    # ones (fusion.tracking.history.revise_associations)
+    associations: tuple[ScanAssociations, ...]
     measurements: tuple[ScanPoints, ...] = ()  # one per scan that took new measurements
     # sensor time before which nothing can change any more after this call (Tracker.horizon_ns;
     # None before the window has one): what a consumer derived from earlier rows is final
@@ -305,5 +307,6 @@ class StepResult:
 
     @property
     def n_associations(self) -> int:
-        """The associations' rows: one per measurement of every scan run (again)."""
+        """The associations' rows: one per measurement of a scan's first run, one per new or changed
+        association of a scan run again."""
         return sum(len(block) for block in self.associations)

@@ -31,7 +31,7 @@ from fusion.tracking.batched_gating import make_gater
 from fusion.tracking.checkpoint import TrackerState, restore, state_of
 from fusion.tracking.controls import InputTimeline
 from fusion.tracking.detection import ControlInput, Detection, Reason, Refusal
-from fusion.tracking.history import Entry, History, Rewind, revise, revise_events
+from fusion.tracking.history import Entry, History, Rewind, revise, revise_associations, revise_events
 from fusion.tracking.intake import Intake
 from fusion.tracking.lifecycle import Lifecycle
 from fusion.tracking.models import initial_covariance_diag, layout, make_filter, motion_model, sensor_models
@@ -207,7 +207,7 @@ class Tracker:
             entry = Entry(key, dets, ts, tally=out.tally, associations=out.associations, gates=gates)
             estimates.extend(revise(entry, prev, out.estimates, kept, out.signatures))
             events.extend(revise_events(entry, prev, out.events, kept))
-            assoc.append(out.associations)
+            assoc.append(revise_associations(prev, out.associations))
             self.history.append(entry)
             ts = out.after
         self._ts = ts

@@ -18,6 +18,13 @@ A fourth: the 2-D covariance ellipses (world/tracks/<label>/{cov,trail}) are com
 form (fusion.io.derive.eig_sym2), not by LAPACK: the same rows at the same steps, each the same
 33 points (the circle's samples are symmetric under the eigenvectors' sign, so only their order
 and last bits can differ); mix's were regenerated.
+A fifth (2026-12-07): a scan run again reports the associations that changed and the new
+measurements' (fusion.tracking.history.revise_associations), not every association of the scan:
+mix's record/associations holds 2 248 rows instead of 2 854. Recorded with one flush at the close,
+that is the only entity that differs (checked); with a flush every 300 pending rows the flushes
+fall at other steps, so mix's counts/* (24 rows instead of 27) and its live metrics/{ospa,gospa}
+(the same 20 times; the estimates a flush holds of a time are not the same) were regenerated too,
+on both platforms.
 
 The reference holds per floating-point platform (tests/platform_bits.py): recording_reference.json
 is x86-64-avx512's. On x86-64-avx2 (numpy's loops and OpenBLAS's kernels of an AVX2 machine) cv1d_a
