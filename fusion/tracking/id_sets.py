@@ -150,7 +150,9 @@ def _rerun_sets(old_ids: np.ndarray, old_seqs: np.ndarray, seed_ids: np.ndarray,
         if inv_j[k] >= seqs.size or seqs[inv_j[k]] != all_seqs[k]:
             raise ValueError("rerun_sets: a pair's detection is not one of seqs")
     seen_i, seen_j = _reached(inv_i[:E], inv_j[:E], n_ts + extra.size, seqs.size, inv_i[E:], inv_j[E:])
-    rows = np.flatnonzero(seen_i[:n_ts])
+    # a track id's node is its first row (in ts_ids' sorted order): every row of a reached id
+    # (two rows can share an id: births of a sensor's two epochs from the same seq and time)
+    rows = np.flatnonzero(seen_i[_dense(sorted_ts, order, extra, ts_ids)])
     for k in range(1, seqs.size):  # a seq's node is its first position: its equal seqs (other epochs) too
         if seqs[k] == seqs[k - 1] and seen_j[k - 1]:
             seen_j[k] = True
@@ -182,12 +184,12 @@ def rerun_sets(old_ids: np.ndarray, old_seqs: np.ndarray, seed_ids: np.ndarray, 
       ti, mj:            the new pairs with both ends inside the reach as indices into rows and
                          js, sorted by (mj, ti), as fusion.core.association.coarse_pairs orders them.
     `seqs` is sorted ascending and holds every seq of the pairs and seeds (the scan's detections);
-    every track id of the pairs and seeds is one of ts_ids (unique) or of seed_ids (a gone track
-    is a seed). A seq is one node of the reach: equal seqs (a sensor's two epochs) are reached
-    together. The tracks and detections are indexed by their rows in ts_ids and first positions in
-    seqs (one binary search each, over ts_ids sorted once here), not by sorting the pairs' ids
-    and seqs for their unique values (two np.unique calls of up to thousands: ~0.1 ms a re-run
-    at 667 targets)."""
+    every track id of the pairs and seeds is one of ts_ids or of seed_ids (a gone track is a
+    seed). A seq is one node of the reach, and so is a track id: equal seqs, and rows of one id
+    (a sensor's two epochs), are reached together. The tracks and detections are indexed by
+    their first rows in ts_ids and first positions in seqs (one binary search each, over ts_ids
+    sorted once here), not by sorting the pairs' ids and seqs for their unique values (two
+    np.unique calls of up to thousands: ~0.1 ms a re-run at 667 targets)."""
     c = np.ascontiguousarray
     via_ids, via_seqs = (old_ids, old_seqs) if via is None else via
     old_ids, old_seqs, seed_ids, add_ids, add_seqs, seed_seqs, ts_ids, seqs, via_ids, via_seqs = (

@@ -174,8 +174,9 @@ def test_rerun_sets_are_the_steps_they_replaced(seed: int, size: tuple[int, int,
     tracks and new detections: few pairs (a partial re-run at 100 targets) and many (at ~700).
     The reach follows the stored coarse pairs, or
     (`fine`) a subset of them, as the stored run's fine pairs are: then some new pairs of
-    reached tracks end outside the reach, and are not the part's. `equal`: some seqs twice (a
-    sensor restarted: another epoch's measurements with the same seqs)."""
+    reached tracks end outside the reach, and are not the part's. `equal`: some seqs twice and a
+    track id on two rows (a sensor restarted: another epoch's measurements with the same seqs, and
+    the tracks they start at the same times, whose ids are those of the first epoch's)."""
     T, D, E_max, A_max = size
     rng = np.random.default_rng(seed)
     before = rng.choice(2**62, T, replace=False).astype(np.int64)
@@ -188,8 +189,12 @@ def test_rerun_sets_are_the_steps_they_replaced(seed: int, size: tuple[int, int,
     old_ids, old_seqs = pairs[:, 0].copy(), pairs[:, 1].copy()
     gone_mask = rng.random(T) < 0.1
     ts_ids = np.concatenate([before[~gone_mask], rng.choice(2**62, 2).astype(np.int64)])  # two born since
+    if equal:
+        ts_ids[-1] = ts_ids[0]  # one of them with the id of another row
     changed = rng.random(ts_ids.size) < 0.15
     changed[-2:] = True  # tracks the stored run did not have are changed
+    if equal:
+        changed[0] = True  # and the row whose id the last one shares (the seeds are ids)
     new = np.zeros(D, dtype=bool)
     new[D - 5:] = rng.random(5) < 0.6
     A = int(rng.integers(0, A_max))
