@@ -138,11 +138,7 @@ def _rerun_sets(old_ids: np.ndarray, old_seqs: np.ndarray, seed_ids: np.ndarray,
     # detection's position in seqs
     E = via_ids.size + add_ids.size
     n_ts = ts_ids.size
-    lacks = np.zeros(seed_ids.size, dtype=np.bool_)
-    for k in range(seed_ids.size):
-        at = np.searchsorted(sorted_ts, seed_ids[k])
-        lacks[k] = not (at < n_ts and sorted_ts[at] == seed_ids[k])
-    extra = np.unique(seed_ids[lacks])
+    extra = np.unique(seed_ids[~_in_sorted(seed_ids, sorted_ts)])
     inv_i = _dense(sorted_ts, order, extra, np.concatenate((via_ids, add_ids, seed_ids)))
     all_seqs = np.concatenate((via_seqs, add_seqs, seed_seqs))
     inv_j = np.searchsorted(seqs, all_seqs)
