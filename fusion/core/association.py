@@ -115,7 +115,7 @@ def gnn_assign(
     if ti.size == 0:
         return np.zeros(0, dtype=np.intp)
     c = np.ascontiguousarray
-    return _gnn(c(ti, np.intp), c(mj, np.intp), c(cost, np.float64), c(limit, np.float64), int(n_tracks),
+    return gnn_positions(c(ti, np.intp), c(mj, np.intp), c(cost, np.float64), c(limit, np.float64), int(n_tracks),
                 int(n_meas))
 
 
@@ -128,10 +128,11 @@ def _root(parent: np.ndarray, a: int) -> int:
 
 
 @njit(cache=True, fastmath=False)
-def _gnn(ti: np.ndarray, mj: np.ndarray, cost: np.ndarray, limit: np.ndarray, n_tracks: int, n_meas: int
-         ) -> np.ndarray:
-    """gnn_assign's work: components by union-find (nodes: tracks, then n_tracks + measurement),
-    each decided or solved, the chosen positions sorted by (mj, ti)."""
+def gnn_positions(ti: np.ndarray, mj: np.ndarray, cost: np.ndarray, limit: np.ndarray, n_tracks: int,
+                  n_meas: int) -> np.ndarray:
+    """gnn_assign's work, for compiled callers (intp ti, mj; float64 cost, limit; at least one
+    pair): components by union-find (nodes: tracks, then n_tracks + measurement), each decided
+    or solved, the chosen positions sorted by (mj, ti)."""
     n_pairs = ti.size
     parent = np.arange(n_tracks + n_meas)
     for p in range(n_pairs):

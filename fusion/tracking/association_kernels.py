@@ -1,13 +1,48 @@
-"""A scan's associations as columns (fusion.tracking.results.ScanAssociations), built, spliced
-and counted by compiled loops (numba): a whole scan's hundreds of measurements, and a partial
-re-run's few, each in one call instead of the dozen numpy calls (a few us each) that cost more
-than the work on a partial re-run's handful of rows. Outcome codes are passed in (indices into
-fusion.tracking.results.OUTCOMES), so this module knows only the arrays."""
+"""A scan's assignment in its two stages (`confirmed_first`), and its associations as columns
+(fusion.tracking.results.ScanAssociations), built, spliced and counted by compiled loops (numba):
+a whole scan's hundreds of measurements, and a partial re-run's few, each in one call instead of
+the dozen numpy calls (a few us each) that cost more than the work on a partial re-run's handful
+of rows. Outcome and status codes are passed in (indices into fusion.tracking.results.OUTCOMES,
+fusion.tracking.trackset.Status), so this module knows only the arrays."""
 
 from __future__ import annotations
 
 import numpy as np
 from numba import njit
+
+from fusion.core.association import gnn_positions
+
+
+@njit(cache=True, fastmath=False)
+def confirmed_first(ti: np.ndarray, mj: np.ndarray, cost: np.ndarray, limit: np.ndarray, nis: np.ndarray,
+                    status: np.ndarray, confirmed: int, n_tracks: int, n_meas: int) -> np.ndarray:
+    """The pairs assigned (positions, increasing) of the gated pairs (ti, mj: intp, sorted by
+    (mj, ti); cost, limit, nis: float64; status: each pair's track's): GNN over the pairs of
+    tracks whose status is `confirmed` (cost and limit as given: fusion.core.association), then
+    GNN over the other tracks' pairs with the measurements the first stage left, by Mahalanobis
+    distance: cost sqrt(nis), limit sqrt(limit - cost + nis) (sqrt correctly rounded, as
+    numpy's)."""
+    taken = np.zeros(n_meas, dtype=np.bool_)
+    chosen = np.zeros(ti.size, dtype=np.bool_)
+    for stage in range(2):
+        n = 0
+        sel = np.empty(ti.size, dtype=np.intp)
+        for p in range(ti.size):
+            if (status[p] == confirmed) == (stage == 0) and not taken[mj[p]]:
+                sel[n] = p
+                n += 1
+        if n == 0:
+            continue
+        sel = sel[:n]
+        c, lim = cost[sel], limit[sel]
+        if stage == 1:
+            v = nis[sel]
+            lim = np.sqrt(lim - c + v)
+            c = np.sqrt(v)
+        for q in gnn_positions(ti[sel], mj[sel], c, lim, n_tracks, n_meas):
+            chosen[sel[q]] = True
+            taken[mj[sel[q]]] = True
+    return np.flatnonzero(chosen)
 
 
 @njit(cache=True, fastmath=False)

@@ -21,10 +21,10 @@ from enum import StrEnum
 
 import numpy as np
 
-from fusion.core.association import coarse_pairs, gnn_assign
+from fusion.core.association import coarse_pairs
 from fusion.core.checks import Array
 from fusion.core.imm import IMM, Filter, combine
-from fusion.tracking.association_kernels import built
+from fusion.tracking.association_kernels import built, confirmed_first
 from fusion.tracking.detection import Detection, seqs_of
 from fusion.tracking.gating import Gated, Gater, Measured
 from fusion.tracking.lifecycle import Lifecycle
@@ -208,25 +208,11 @@ def _assign_confirmed_first(g: Gated, ts: TrackSet, n_meas: int) -> list[int]:
     log-likelihood), then over tentative tracks and the measurements the first stage left, by
     Mahalanobis distance sqrt(NIS) as an initiator does: among tentative tracks the likelihood
     would favour the narrowest (often clutter-born) gate over the right one (bench/gospa.py
-    measured both; BENCHMARKS.md)."""
+    measured both; BENCHMARKS.md). One compiled call (association_kernels.confirmed_first)."""
     if g.ti.size == 0:
         return []
-    conf = ts.status[g.ti] == Status.CONFIRMED.value  # the int: a comparison with the enum costs 3 us more
-    out: list[np.ndarray] = []
-    taken = np.zeros(n_meas, dtype=bool)
-    for stage, likelihood in ((conf, True), (~conf, False)):
-        sel = np.flatnonzero(stage & ~taken[g.mj])
-        if sel.size == 0:
-            continue
-        cost, limit = g.cost[sel], g.limit[sel]
-        if not likelihood:  # tentative tracks: Mahalanobis distance sqrt(NIS) against sqrt(gate)
-            nis = g.nis[sel]
-            cost, limit = np.sqrt(nis), np.sqrt(limit - cost + nis)
-        chosen = sel[gnn_assign(g.ti[sel], g.mj[sel], cost, limit, n_tracks=len(ts), n_meas=n_meas)]
-        out.append(chosen)
-        taken[g.mj[chosen]] = True
-    # pairs are sorted by (measurement, track): their positions in that order
-    return np.sort(np.concatenate(out)).tolist() if out else []
+    return confirmed_first(g.ti, g.mj, g.cost, g.limit, g.nis, ts.status[g.ti], Status.CONFIRMED.value, len(ts),
+                           n_meas).tolist()
 
 
 def measured_points(sm: SensorModel, dets: tuple[Detection, ...]) -> tuple[Array, Array]:

@@ -1,21 +1,24 @@
 """The compiled and shortened parts of the scan (issue 11) give what the numpy formulations they
 replace gave, bit for bit: the IMM predict's distinct steps and its per-step F, Q kept across
 scans, the innovation per mode indexed in place, the lifecycle's per-row rules, id membership and
-a re-run's pairs, reach and part (rerun_sets), the predicted positions, and a one-dimension scan's stacks."""
+a re-run's pairs, reach and part (rerun_sets), the predicted positions, a one-dimension scan's stacks
+and the assignment's two stages (confirmed_first)."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
+from fusion.core.association import gnn_assign
 from fusion.core.compiled_imm import distinct, innovate_modes
 from fusion.core.compiled_stack import innovate_many
 from fusion.core.imm_stack import StepCache, predict_imm
 from fusion.core.modes import Mode, build_imm
+from fusion.tracking.association_kernels import confirmed_first
 from fusion.tracking.gating import Measured
 from fusion.tracking.id_sets import member, rerun_sets
 from fusion.tracking.lifecycle_kernel import COASTED, COVARIANCE, MISSES, NOT_CONFIRMED, verdicts
-from fusion.tracking.trackset import Layout, Rows, TrackSet
+from fusion.tracking.trackset import Layout, Rows, Status, TrackSet
 
 
 def _bits(*arrays: np.ndarray) -> list[bytes]:
@@ -274,3 +277,38 @@ def test_rerun_sets_refuses_pairs_outside_its_tracks_and_detections() -> None:
         rerun_sets(np.array([10, 40]), np.array([1, 2]), np.array([10]), none, none, none, ts_ids, seqs)
     with pytest.raises(ValueError, match="detection"):
         rerun_sets(np.array([10, 20]), np.array([1, 5]), np.array([10]), none, none, none, ts_ids, seqs)
+
+
+def _two_stages(ti: np.ndarray, mj: np.ndarray, cost: np.ndarray, limit: np.ndarray, nis: np.ndarray,
+                conf: np.ndarray, n_tracks: int, n_meas: int) -> list[int]:
+    """The scan's assignment as numpy and gnn_assign calls, before confirmed_first."""
+    out: list[np.ndarray] = []
+    taken = np.zeros(n_meas, dtype=bool)
+    for stage, likelihood in ((conf, True), (~conf, False)):
+        sel = np.flatnonzero(stage & ~taken[mj])
+        if sel.size == 0:
+            continue
+        c, lim = cost[sel], limit[sel]
+        if not likelihood:
+            c, lim = np.sqrt(nis[sel]), np.sqrt(lim - c + nis[sel])
+        chosen = sel[gnn_assign(ti[sel], mj[sel], c, lim, n_tracks=n_tracks, n_meas=n_meas)]
+        out.append(chosen)
+        taken[mj[chosen]] = True
+    return np.sort(np.concatenate(out)).tolist() if out else []
+
+
+@pytest.mark.parametrize("seed", range(300))
+def test_confirmed_first_is_the_two_stages_it_replaced(seed: int) -> None:
+    """Random gated pairs of confirmed and tentative tracks, NIS and gate as the batched gate
+    gives them (cost = NIS + ln det S, limit = cost - NIS + g), some at equal costs."""
+    rng = np.random.default_rng(seed)
+    nt, nm = int(rng.integers(1, 10)), int(rng.integers(1, 10))
+    mj, ti = np.nonzero((rng.random((nt, nm)) < rng.random()).T)
+    ti, mj = ti.astype(np.intp), mj.astype(np.intp)
+    nis = rng.choice([0.5, 1.0, 2.0], size=ti.size) if seed % 3 == 0 else rng.exponential(3.0, size=ti.size)
+    cost = nis + rng.normal(size=ti.size)
+    limit = cost - nis + 9.21
+    status = np.where(rng.random(nt) < 0.5, Status.CONFIRMED.value, Status.TENTATIVE.value).astype(np.int8)[ti]
+    want = _two_stages(ti, mj, cost, limit, nis, status == Status.CONFIRMED.value, nt, nm)
+    if ti.size:
+        assert confirmed_first(ti, mj, cost, limit, nis, status, Status.CONFIRMED.value, nt, nm).tolist() == want
