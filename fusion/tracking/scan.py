@@ -23,7 +23,7 @@ import numpy as np
 
 from fusion.core.association import coarse_pairs
 from fusion.core.checks import Array
-from fusion.core.imm import IMM, Filter, combine
+from fusion.core.imm import IMM, Filter, combine_each
 from fusion.tracking.association_kernels import built, confirmed_first
 from fusion.tracking.detection import Detection, seqs_of
 from fusion.tracking.gating import Gated, Gater, Measured
@@ -270,8 +270,7 @@ def _born_rows(ts: TrackSet, born: list[Detection], pos: Array, sm: SensorModel,
         M = len(ctx.filter.filters)
         MU = np.full((k, M), 1.0 / M)
         MX, MP = np.repeat(X[:, None], M, axis=1), np.repeat(P[:, None], M, axis=1)
-        for b in range(k):  # their combination, by the IMM's own arithmetic
-            X[b], P[b] = combine(MX[b], MP[b], MU[b])
+        X, P = combine_each(MX, MP, MU)  # their combination, by the IMM's own arithmetic
     t = np.array([d.t_ns for d in born], dtype=np.int64)
     seq = np.array([d.seq for d in born], dtype=np.int64)
     sensor = np.full(k, sm.index, np.int32)

@@ -2,7 +2,7 @@
 replace gave, bit for bit: the IMM predict's distinct steps and its per-step F, Q kept across
 scans, the innovation per mode indexed in place, the lifecycle's per-row rules, id membership and
 a re-run's pairs, reach and part (rerun_sets), the predicted positions, a one-dimension scan's stacks
-and the assignment's two stages (confirmed_first)."""
+the assignment's two stages (confirmed_first) and the births' mode combination (combine_each)."""
 
 from __future__ import annotations
 
@@ -12,6 +12,7 @@ import pytest
 from fusion.core.association import gnn_assign
 from fusion.core.compiled_imm import distinct, innovate_modes
 from fusion.core.compiled_stack import innovate_many
+from fusion.core.imm import combine, combine_each
 from fusion.core.imm_stack import StepCache, predict_imm
 from fusion.core.modes import Mode, build_imm
 from fusion.tracking.association_kernels import confirmed_first
@@ -312,3 +313,20 @@ def test_confirmed_first_is_the_two_stages_it_replaced(seed: int) -> None:
     want = _two_stages(ti, mj, cost, limit, nis, status == Status.CONFIRMED.value, nt, nm)
     if ti.size:
         assert confirmed_first(ti, mj, cost, limit, nis, status, Status.CONFIRMED.value, nt, nm).tolist() == want
+
+
+@pytest.mark.parametrize("seed", range(60))
+def test_combine_each_is_combine_row_by_row(seed: int) -> None:
+    """The births' combination of their modes (scan._born_rows: every mode at (x, P), equally
+    likely) and any stack of mixtures, against IMM.combine row by row: bit for bit."""
+    rng = np.random.default_rng(seed)
+    k, M, n = int(rng.integers(1, 12)), int(rng.integers(1, 5)), int(rng.integers(2, 7))
+    if seed % 2:  # births: equal modes, equal probabilities
+        X, P = rng.normal(size=(k, n)) * 1e3, _spd(rng, n, k)
+        MX, MP, MU = np.repeat(X[:, None], M, axis=1), np.repeat(P[:, None], M, axis=1), np.full((k, M), 1.0 / M)
+    else:
+        MX, MP = rng.normal(size=(k, M, n)) * 1e3, _spd(rng, n, k, M)
+        MU = rng.dirichlet(np.ones(M), size=k)
+    x, P = combine_each(MX, MP, MU)
+    rows = [combine(MX[b], MP[b], MU[b]) for b in range(k)]
+    assert _bits(x, P) == _bits(np.array([r[0] for r in rows]), np.array([r[1] for r in rows]))
