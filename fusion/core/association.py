@@ -19,8 +19,8 @@ and measurements); a component of one pair takes it when c < l, and a larger one
 dense square problem (its a tracks and b measurements, each with a "left free" column or row at
 the miss cost, the free-free block 0, pairs not gated 1e18) by fusion.core.lsap.solve_dense,
 scipy's algorithm and tie rules compiled. All of it is one compiled call per assignment: the
-components were a Python loop of numpy calls and a scipy call each (19 % of a 1000-target scan,
-2026-12-07).
+components were a Python loop of numpy calls and a scipy call each (where gates overlap often, as
+in the mix's scene at 1000 targets, 20 % of a scan; BENCHMARKS.md, Tracker).
 """
 
 from __future__ import annotations
@@ -140,10 +140,8 @@ def gnn_positions(ti: np.ndarray, mj: np.ndarray, cost: np.ndarray, limit: np.nd
         if a != b:
             parent[max(a, b)] = min(a, b)
     comp = np.empty(n_pairs, dtype=np.intp)
-    size = np.zeros(n_tracks + n_meas, dtype=np.intp)
     for p in range(n_pairs):
         comp[p] = _root(parent, ti[p])
-        size[comp[p]] += 1
     chosen = np.zeros(n_pairs, dtype=np.bool_)
     # the pairs grouped by component (a stable counting sort: each group in increasing p)
     start = np.zeros(n_tracks + n_meas + 1, dtype=np.intp)
