@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
@@ -40,11 +40,14 @@ def running_service(cfg: ServiceConfig, tmp: Path) -> Iterator[tuple[Service, st
         assert not t.is_alive(), "the service did not stop"
 
 
-def run_live(name: str, tmp: Path, *, duration_s: float | None = None, speed: float = 0.0
+def run_live(name: str, tmp: Path, *, duration_s: float | None = None, speed: float = 0.0,
+             held: Callable[[Any], bool] | None = None
              ) -> tuple[ServiceConfig, list[Any], dict[str, int], list[m.Estimate], Service]:
     """The scenario through the live service, a subscriber collecting the estimates: (service
     config, samples, publisher counts, estimates received, the stopped service). The service's
-    stream file is tmp/live.fstream, its recording tmp/live.rrd."""
+    stream file is tmp/live.fstream, its recording tmp/live.rrd. With `held`, the samples it
+    picks are published after the service has handled all the others (late data whatever the
+    machine's speed)."""
     from publishers.publish import publish
     from publishers.stream import build_stream
 
@@ -58,7 +61,12 @@ def run_live(name: str, tmp: Path, *, duration_s: float | None = None, speed: fl
             col = EstimateCollector(sub_session, cfg.namespace)
             pub_session = client(endpoint)
             try:
-                counts = publish(pub_session, samples, speed=speed, match_timeout_s=5.0)
+                later = [] if held is None else [s for s in samples if held(s)]
+                first = samples if not later else [s for s in samples if not held(s)]
+                counts = publish(pub_session, first, speed=speed, match_timeout_s=5.0)
+                if later:
+                    assert svc.wait_idle(timeout_s=60.0)
+                    counts += publish(pub_session, later, speed=speed, match_timeout_s=5.0)
             finally:
                 pub_session.close()
             assert svc.wait_idle(timeout_s=60.0)
