@@ -49,7 +49,10 @@ class Outputs:
         return tuple(p.path for p in (self.sink, self.stream) if p is not None)
 
     def maybe_sweep(self) -> None:
-        """Retention of a rotating set, on its cadence."""
+        """The stream beside the recording's current file, and the retention of a rotating set
+        when a file rotated."""
+        if self.stream is not None:
+            self.stream.follow()
         if self.retention is not None:
             self.retention.maybe_sweep(self.files())
 
@@ -64,10 +67,12 @@ class Outputs:
         return self.sink.path.stat().st_size if self.sink is not None and self.sink.path.exists() else 0
 
     def close(self) -> None:
-        """Close the recording (its last flush) and the stream, then apply the retention."""
+        """Close the recording (its last flush) and the stream (moved to the recording's last
+        file first), then apply the retention."""
         if self.recording is not None:
             self.recording.close()
         if self.stream is not None:
+            self.stream.follow()  # the recording may have moved to a new file since the last batch
             self.stream.close()
         if self.retention is not None:
             self.retention.sweep(self.files())

@@ -3,7 +3,8 @@ never a reason to stop tracking; and retention of old recordings.
 
 `RotatingStream` writes records to `<stem>.fstream` beside the current Rerun file: when the
 recording moves to a new file (`follow()` returns another path), the stream moves with it to
-the new stem, so each `.rrd` has its `.fstream`. A stream that reaches `rotate_bytes` on its own
+the new stem at its next write or `follow()` (the service calls it between batches and after
+the recording's last flush), so each `.rrd` has its `.fstream`. A stream that reaches `rotate_bytes` on its own
 (large payloads) goes on in `<stem>-1.fstream`, `<stem>-2.fstream`, ... Every file is a
 complete stream file (fusion.io.streamfile), readable on its own. An OSError (disk full, folder
 gone) ends the stream: logged once, kept in `error`; later records are counted in `lost` and
@@ -80,6 +81,13 @@ class RotatingStream:
                 self._fail(self.path, e)
         self._open()
 
+    def follow(self) -> None:
+        """Move to the recording's new file if it moved, also while no record comes (a file the
+        recording opened in a quiet spell, or at its last flush, gets its stream file too)."""
+        if self._follow is not None and (now := self._follow()) != self._followed:
+            self._followed, self._base, self._part = now, now.with_suffix(STREAM_SUFFIX), 0
+            self._rotate()
+
     def write(self, arrival_ns: int, key: str, payload: bytes) -> None:
         self.write_many([(arrival_ns, key, payload)])
 
@@ -87,9 +95,7 @@ class RotatingStream:
         """Append a batch of records, one write per file it goes to: a part holds records up
         to the first that takes it to rotate_bytes (counted as payload + key + 16 per record),
         the rest go on in the next part. Records that cannot be written are counted in `lost`."""
-        if self._follow is not None and (now := self._follow()) != self._followed:
-            self._followed, self._base, self._part = now, now.with_suffix(STREAM_SUFFIX), 0
-            self._rotate()
+        self.follow()
         i, n = 0, len(records)
         while i < n:
             if self._w is not None and self._bytes >= self.rotate_bytes:

@@ -10,6 +10,7 @@ import msgspec
 import pytest
 
 from fusion.config import RecordingConfig
+from fusion.io.outputs import Outputs
 from fusion.io.stream_rotation import Retention, RotatingStream
 from fusion.io.streamfile import StreamReader
 from publishers.publish import publish
@@ -41,6 +42,41 @@ def test_the_stream_follows_the_recording_and_rotates_by_size(tmp_path: Path) ->
     b.close()
     assert len(b.files) == 7 and b.files[1].name == "g-1.fstream"
     assert [r[0] for f in b.files for r in StreamReader(f)] == list(range(50)), "a record lost at a boundary"
+
+
+class _MovingRecording:
+    """A recording that moves to its next file when closed or on `move()` (as RotatingSink does
+    at a step after the stream took the batch's records)."""
+
+    def __init__(self, directory: Path) -> None:
+        self.directory, self.n = directory, 0
+
+    @property
+    def path(self) -> Path:
+        return self.directory / f"f-{self.n:04d}.rrd"
+
+    def move(self) -> None:
+        self.n += 1
+
+    def close(self) -> None:
+        self.move()
+
+
+def test_every_recording_file_gets_its_stream_file_also_without_records(tmp_path: Path) -> None:
+    """The recording moves to a new file at the batch's steps, after the stream wrote the batch:
+    between batches (maybe_sweep) and at close the stream follows it, so no .rrd is without its
+    .fstream (before, the last file of a run had none)."""
+    sink = _MovingRecording(tmp_path)
+    stream = RotatingStream(tmp_path / "f-0000.fstream", namespace="demo", rotate_bytes=10**9,
+                            follow=lambda: sink.path)
+    out = Outputs(sink, stream, None, None)  # type: ignore[arg-type]
+    stream.write_many([rec(i) for i in range(5)])
+    sink.move()  # the batch's steps moved the recording on
+    out.maybe_sweep()  # the loop between batches, with no record to write
+    out.close()
+    assert [p.name for p in stream.files] == ["f-0000.fstream", "f-0001.fstream", "f-0002.fstream"]
+    assert [r[0] for r in StreamReader(stream.files[0])] == list(range(5))
+    assert all(list(StreamReader(p)) == [] for p in stream.files[1:]), "the later ones are complete, empty files"
 
 
 @pytest.mark.parametrize("batch", [1, 3, 7, 50], ids=lambda b: f"batch{b}")
