@@ -14,10 +14,10 @@ Queryables (answers prepared by the loop, so callbacks never touch the tracker):
   fusion/<ns>/snapshot   the latest estimate of every confirmed track (msgpack list);
                          with ?t_ns=T every confirmed track predicted to T (answered by the loop;
                          fusion.snapshot_answers)
-Publications: fusion/<ns>/tracks/<id> (estimates), fusion/<ns>/events/<id> (confirmed,
-coasting, deleted with the reason, withdrawals; fusion.publication) and, with [publication]
-period_s, fusion/<ns>/predicted (fusion.prediction); with smooth_lag, fusion/<ns>/smoothed/<id>
-(fusion.fixed_lag).
+Publications (fusion.outbox): fusion/<ns>/tracks/<id> (estimates), fusion/<ns>/events/<id>
+(confirmed, coasting, deleted with the reason, withdrawals; fusion.publication) and, with
+[publication] period_s, fusion/<ns>/predicted (fusion.prediction); with smooth_lag,
+fusion/<ns>/smoothed/<id> (fusion.fixed_lag).
 Shutdown (SIGINT, SIGTERM or stop()): stop intake, drain the queue for at most
 intake.drain_deadline_s (the rest dropped, counted as "shutdown"), flush and close the
 recording and the stream file, close the Zenoh session.
@@ -30,15 +30,12 @@ import logging
 import threading
 import time
 from collections import Counter
-from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from fusion import messages as m
 from fusion.config import ServiceConfig, mode_names
-from fusion.fixed_lag import FixedLagSmoother, smoothed_key
 from fusion.io import wire, zenoh_acl
 from fusion.io.burst import Drained, drain_burst
 from fusion.io.channel_intake import ChannelIntake, Taken
@@ -53,12 +50,11 @@ from fusion.io.sink_thread import SinkThread
 from fusion.io.stream_rotation import RotatingStream
 from fusion.io.zenoh_advanced import RecoveringSubscription
 from fusion.io.zenoh_bus import connection_of, open_with_retry
-from fusion.io.zenoh_publishers import KeyedPublishers
+from fusion.outbox import Outbox
 from fusion.pipeline import Pipeline, Record
-from fusion.prediction import Cadence, encode_predicted, predicted_key
 from fusion.snapshot_answers import SnapshotAnswers
 from fusion.tracking.detection import Detection, Reason
-from fusion.tracking.results import Counts, Estimate
+from fusion.tracking.results import Counts
 from fusion.tracking.tracker import Tracker
 from fusion.tracking.trackset import Status
 from fusion.tracking.warmup import warm_up
@@ -109,21 +105,30 @@ class Service:
         self._status_payload = b""
         self._status_at = 0.0
         self.snapshots = SnapshotAnswers(self.ns, self.tracker, self.pipeline.snapshot)
-        self.published = 0
-        self.events_published = 0
-        self.predicted_published = 0  # periodic predicted snapshots
-        period_ns = round(config.publication.period_s * 1e9)
-        self.cadence = Cadence(period_ns) if period_ns > 0 else None
-        lag = config.publication.smooth_lag
-        self.lag_smoother = FixedLagSmoother(self.tracker, lag) if lag > 0 else None
-        self.smoothed_published = 0
         self.session: Any = None
+        self.outbox = Outbox(self.ns, self.tracker, self.snapshots, config.publication)  # fusion.outbox
         self._decls: list[Any] = []
-        self._track_pubs: KeyedPublishers | None = None  # one declared publisher per published track
-        self.on_publish: Callable[[Estimate], None] | None = None
         self._connect_attempts = 0
         self._linked = True  # a client: connected to its peer or router when last looked
         self._reconnects = 0
+
+    @property
+    def published(self) -> int:
+        """Estimates published."""
+        return self.outbox.published
+
+    @property
+    def events_published(self) -> int:
+        return self.outbox.events
+
+    @property
+    def smoothed_published(self) -> int:
+        return self.outbox.smoothed
+
+    @property
+    def predicted_published(self) -> int:
+        """Periodic predicted snapshots published."""
+        return self.outbox.predicted
 
     @property
     def intake(self) -> IntakeQueue:
@@ -219,6 +224,7 @@ class Service:
             self.session.close()
             self.session = None
             raise
+        self.outbox.open(self.session)
         self._refresh_status(force=True)
         s = self.session
         fifo = self._zenoh.handlers.FifoChannel
@@ -278,39 +284,8 @@ class Service:
             self.stream.write_many(batch)
         out = self.pipeline.ingest(batch, more=more, prune=False, decoded=decoded)  # pruned once out (below)
         self._processed += len(batch)
-        enc = wire.estimate_encoder(self.tracker.layout, self.tracker.model_name)
-        BLOCK = self._zenoh.CongestionControl.BLOCK
-        pubs = self._publishers()
-        payloads = wire.estimates_encoder(self.tracker.layout, self.tracker.model_name)(out.to_publish)
-        for e, payload in zip(out.to_publish, payloads, strict=True):
-            pubs.put(e.track_id, payload)
-            self.published += 1
-            if self.on_publish is not None:
-                self.on_publish(e)
-        self.snapshots.published(out.to_publish, payloads)  # the snapshot reuses the bytes (_refresh_status)
-        for ev in out.events_to_publish:
-            self.session.put(m.event_key(self.ns, ev.track_id), m.encode(wire.event_message(ev)),
-                             congestion_control=BLOCK)
-            self.events_published += 1
-        if self.lag_smoother is not None:
-            for e in self.lag_smoother.update(out.result.estimates):
-                self.session.put(smoothed_key(self.ns, e.track_id), enc(e), congestion_control=BLOCK)
-                self.smoothed_published += 1
-        if self.cadence is not None:
-            first = min((p.t_ns for p in out.result.measurements), default=None)
-            for t_ns in self.cadence.due(self.tracker.now_ns, first):
-                self.session.put(predicted_key(self.ns), encode_predicted(self.tracker, t_ns),
-                                 congestion_control=BLOCK)
-                self.predicted_published += 1
+        self.outbox.send(out)
         self.pipeline.prune()
-
-    def _publishers(self) -> KeyedPublishers:
-        """The track publishers of the current session (fusion.io.zenoh_publishers)."""
-        if self._track_pubs is None:
-            ns = self.ns
-            self._track_pubs = KeyedPublishers(self.session, lambda tid: wire.track_key(ns, tid),
-                                               congestion_control=self._zenoh.CongestionControl.BLOCK)
-        return self._track_pubs
 
     def run(self, *, duration_s: float | None = None) -> int:
         """Process until stop() (or a signal handler calling it) or `duration_s`; then shut down."""
@@ -384,9 +359,7 @@ class Service:
         for d in self._decls[3:]:
             d.undeclare()
         self._decls = []
-        if self._track_pubs is not None:
-            self._track_pubs.close()
-            self._track_pubs = None
+        self.outbox.close()
         self._out.close()
         self.session.close()
         self.session = None
@@ -494,6 +467,5 @@ class Service:
             return
         self._status_at = now
         self._status_payload = wire.encode_status(self.status_dict())
-        if self._track_pubs is not None:  # deleted tracks give their publishers back
-            self._track_pubs.retire(set(self.tracker.track_set.ids.tolist()))
+        self.outbox.retire(set(self.tracker.track_set.ids.tolist()))  # deleted tracks give their publishers back
         self.snapshots.refresh()
