@@ -112,6 +112,7 @@ def _child(tree: str, targets: int, seconds: float, reps: int) -> dict[str, floa
     def service() -> Service:
         svc = Service(cfg)
         svc.session = _Session()
+        svc.outbox.open(svc.session)  # as Service.open does once its session is open
         it = iter(outs)
         svc.pipeline.ingest = lambda batch, **_: next(it)  # type: ignore[method-assign]  # (more=, prune=)
         return svc
