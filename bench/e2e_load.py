@@ -92,6 +92,35 @@ class Scene:
             k += 1
 
 
+def dense_ticks(n_targets: int, n_messages: int, seed: int, base_ns: int) -> Iterator[tuple[int, int, list[bytes]]]:
+    """The dense scene, as Scene.ticks yields its scans (t_ns from base_ns on, sensor index,
+    payloads) until n_messages are out: the mix's sensors (configs/scenarios/mix.toml: radar1 Pd
+    0.95 with 2 false returns a scan, cam1 Pd 0.9 with 1, over 6 x 6 km; no latency, drop-outs or
+    duplicates) over publishers.truth.mix_truth's targets (two crossing, one turning, the rest
+    from a ring 1-3 km out heading inwards at 5-25 m/s, so their gates meet as they converge),
+    as bench.late_data and the tracker's dense-scene figures use them."""
+    import msgspec
+
+    from publishers.sensors import simulate_sensor
+    from publishers.spec import LatencySpec, load_scenario_file, scenario_path
+    from publishers.truth import mix_truth
+
+    spec = load_scenario_file(scenario_path("mix")).scenario
+    per_s = n_targets * sum(s.rate_hz * s.pd for s in spec.sensors) + sum(s.rate_hz * s.clutter_per_scan
+                                                                         for s in spec.sensors)
+    duration_s = math.ceil(n_messages / per_s * 1.1) + 1.0
+    truths = mix_truth(n_targets=n_targets, dt_s=spec.dt_s, duration_s=duration_s, seed=seed)
+    rng = np.random.default_rng([seed, 3])
+    scans: dict[tuple[int, int], list[bytes]] = {}
+    for sensor in spec.sensors:
+        quiet = msgspec.structs.replace(sensor, latency=LatencySpec(), dropout=0.0, duplicate=0.0)
+        for e in simulate_sensor(quiet, truths, rng):
+            msg = msgspec.structs.replace(e.msg, t_ns=base_ns + e.msg.t_ns)  # > 2^32: a uint64, as restamp wants
+            scans.setdefault((msg.t_ns, SENSORS.index(sensor.id)), []).append(m.encode(msg))
+    for (t, s), payloads in sorted(scans.items()):
+        yield t, s, payloads
+
+
 LATE_WARM_SCANS = 30  # scans sent in order before any is held back (the tracks' births and confirmation)
 LATE_MAX_SCANS = 25  # a held-back measurement goes out 1 to this many scans late (1.7 s: inside the 2 s window)
 
@@ -100,18 +129,20 @@ class Prepared:
     """The first n_messages of a scene, encoded once, re-stamped in place before each blast:
     `restamp(t0_ns)` moves every t_ns by the same amount (msgpack uint64 after the "t_ns" key),
     so the stream starts at t0_ns (the service's clock needs sensor times near arrival times).
-    `late`: the fraction of measurements (after the first LATE_WARM_SCANS scans) sent late, each
-    after the scan 1 to LATE_MAX_SCANS scans after its own (uniform; seeded by `seed`), as
-    bench.late_data holds them back; the rest in time order."""
+    `dense`: dense_ticks' scene instead of Scene's grid. `late`: the fraction of measurements
+    (after the first LATE_WARM_SCANS scans) sent late, each after the scan 1 to LATE_MAX_SCANS
+    scans after its own (uniform; seeded by `seed`), as bench.late_data holds them back; the
+    rest in time order."""
 
-    def __init__(self, n_targets: int, n_messages: int, *, seed: int, late: float = 0.0) -> None:
+    def __init__(self, n_targets: int, n_messages: int, *, seed: int, late: float = 0.0, dense: bool = False) -> None:
         self.sensor: list[int] = []
         self.buf: list[bytearray] = []
         self.rel_ns: list[int] = []
         self.t0_ns = base = 1 << 60
         scans: list[tuple[int, int, list[bytes]]] = []
         n = 0
-        for t, s, payloads in Scene(n_targets, seed).ticks(base):
+        ticks = dense_ticks(n_targets, n_messages, seed, base) if dense else Scene(n_targets, seed).ticks(base)
+        for t, s, payloads in ticks:
             take = payloads[: n_messages - n]
             scans.append((t - base, s, take))
             n += len(take)
@@ -167,8 +198,10 @@ def publisher_main(conn: Any, namespace: str) -> None:
             try:
                 if cmd == "prepare":
                     t = time.perf_counter()
-                    prepared = Prepared(arg["targets"], arg["messages"], seed=arg["seed"], late=arg.get("late", 0.0))
-                    reply: Any = {"encode_s": time.perf_counter() - t, "bytes": sum(len(p) for p in prepared.buf)}
+                    prepared = Prepared(arg["targets"], arg["messages"], seed=arg["seed"], late=arg.get("late", 0.0),
+                                        dense=arg.get("dense", False))
+                    reply: Any = {"encode_s": time.perf_counter() - t, "bytes": sum(len(p) for p in prepared.buf),
+                                  "sensor_s": prepared.rel_ns[-1] / 1e9}
                 elif cmd == "connect":
                     if session is not None:  # left open by a run that failed
                         session.close()

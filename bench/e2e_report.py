@@ -21,7 +21,8 @@ def throughput_line(r: dict[str, Any]) -> str:
     end = (f"drained {r['drain_s']:.1f} s after the last put" if r["drained"]
            else f"{r['unhandled_end']:,} not handled yet{'' if r['warm'] else ', window before the warm-up ended'}")
     rec = "on" if r["recording"] else "off"
-    return (f"service T={r['targets']} recording {rec}: {rate} over {r['window_s']:.1f} s, {end} "
+    scene = " dense" if r.get("scene") == "dense" else ""
+    return (f"service T={r['targets']}{scene} recording {rec}: {rate} over {r['window_s']:.1f} s, {end} "
             f"(primer {r['prime_s']:.1f} s, {r['status_updates']} status updates)")
 
 
@@ -49,29 +50,31 @@ def lat_cell(rs: list[dict[str, Any]], key: str) -> str:
 def print_throughput(out: dict[str, Any], *, repeats: int, n: int) -> None:
     print(f"\nend to end, throughput: {n} measurements blasted (BLOCK), median (min-max) of {repeats}; "
           "rate = applied/s from the service's status over the steady window")
-    print(f"{'targets':>7} {'recording':>9} {'service /s':>22} {'zenoh /s':>26} {'ratio':>8} "
+    print(f"{'scene':>5} {'targets':>7} {'recording':>9} {'service /s':>22} {'zenoh /s':>26} {'ratio':>8} "
           f"{'drain s':>14} {'kB/meas':>8}  notes")
-    for targets in sorted({r["targets"] for r in out["throughput"]}):
-        base = [b["rate"] for b in out["baseline"] if b["targets"] == targets]
-        for rec in (True, False):
-            rs = [r for r in out["throughput"] if r["targets"] == targets and r["recording"] == rec]
-            ratio = [r["rate"] / r["baseline_rate"] for r in rs]
-            drain = [r["drain_s"] for r in rs]
-            notes = []
-            if not all(r["drained"] for r in rs):
-                q = [r["unhandled_end"] for r in rs if not r["drained"]]
-                notes.append(f"not drained ({len(q)}/{len(rs)}): {spread(q)} not handled at the deadline")
-            if not all(r["warm"] for r in rs):
-                notes.append(f"window includes the warm-up ({sum(not r['warm'] for r in rs)}/{len(rs)})")
-            if not all(r["counts_add_up"] for r in rs):
-                notes.append("COUNTS DO NOT ADD UP")
-            refused = {k for r in rs for k in r["refused"]}
-            if refused:
-                notes.append("refused: " + ", ".join(f"{k} {spread([r['refused'].get(k, 0) for r in rs])}"
-                                                     for k in sorted(refused)))
-            kb = spread([r.get("recording_bytes_per_meas", float("nan")) / 1e3 for r in rs], ".2f") if rec else "-"
-            print(f"{targets:>7} {'on' if rec else 'off':>9} {spread([r['rate'] for r in rs]):>22} {spread(base):>26} "
-                  f"{spread(ratio, '.4f'):>8} {spread(drain, '.1f'):>14} {kb:>8}  {'; '.join(notes)}")
+    runs = out["throughput"]
+    for scene, targets, rec in sorted({(r.get("scene", "grid"), r["targets"], r["recording"]) for r in runs},
+                                      key=lambda k: (k[0] != "grid", k[1], not k[2])):
+        base = [b["rate"] for b in out["baseline"] if b["targets"] == targets and b.get("scene", "grid") == scene]
+        rs = [r for r in runs if r["targets"] == targets and r["recording"] == rec and r.get("scene", "grid") == scene]
+        ratio = [r["rate"] / r["baseline_rate"] for r in rs]
+        drain = [r["drain_s"] for r in rs]
+        notes = []
+        if not all(r["drained"] for r in rs):
+            q = [r["unhandled_end"] for r in rs if not r["drained"]]
+            notes.append(f"not drained ({len(q)}/{len(rs)}): {spread(q)} not handled at the deadline")
+        if not all(r["warm"] for r in rs):
+            notes.append(f"window includes the warm-up ({sum(not r['warm'] for r in rs)}/{len(rs)})")
+        if not all(r["counts_add_up"] for r in rs):
+            notes.append("COUNTS DO NOT ADD UP")
+        refused = {k for r in rs for k in r["refused"]}
+        if refused:
+            notes.append("refused: " + ", ".join(f"{k} {spread([r['refused'].get(k, 0) for r in rs])}"
+                                                 for k in sorted(refused)))
+        kb = spread([r.get("recording_bytes_per_meas", float("nan")) / 1e3 for r in rs], ".2f") if rec else "-"
+        print(f"{scene:>5} {targets:>7} {'on' if rec else 'off':>9} {spread([r['rate'] for r in rs]):>22} "
+              f"{spread(base):>26} "
+              f"{spread(ratio, '.4f'):>8} {spread(drain, '.1f'):>14} {kb:>8}  {'; '.join(notes)}")
 
 
 def print_latency(out: dict[str, Any], *, repeats: int, duration_s: float) -> None:

@@ -1,8 +1,9 @@
 """End to end: the service as shipped (`fusion serve --config configs/service.toml`: IMM, radar1
 + cam1, recording on), a real subprocess on 127.0.0.1, fed over Zenoh by a publisher process.
 
-Throughput: N pre-encoded measurements of T targets (bench.e2e_load) blasted with congestion
-control BLOCK; the service's status counters (queried every 0.1 s) give measurements applied
+Throughput: N pre-encoded measurements of T targets (bench.e2e_load: the sparse grid scene, and
+the dense scene of the mix's sensors with the recording on) blasted with congestion control
+BLOCK; the service's status counters (queried every 0.1 s) give measurements applied
 per second over a window that starts once 4T are applied (tracks confirmed) and ends when the
 backlog is drained or `window_s` later; time to drain = last put -> queued 0. Baseline: the same
 messages from the same publisher process to a subscriber process that only counts.
@@ -28,6 +29,8 @@ import numpy as np
 from bench.e2e_load import MSGS_PER_TARGET_S
 from bench.e2e_procs import Publisher, ServiceProcess, prime, zenoh_baseline
 from fusion import messages as m
+
+SCENES = ("grid", "dense")  # bench.e2e_load: Scene (sparse, the goals' figures), dense_ticks (the mix's sensors)
 
 
 def _counts_add_up(c: m.Counts) -> bool:
@@ -176,18 +179,21 @@ def run(*, quick: bool = False) -> dict[str, Any]:
     with tempfile.TemporaryDirectory(prefix="fusion-e2e-") as d, Publisher() as pub:
         tmp = Path(d)
         for targets in (100, 1000):
-            prep = pub.call("prepare", {"targets": targets, "messages": n, "seed": targets}, timeout_s=300.0)
-            print(f"T={targets}: {n} measurements prepared ({prep['bytes'] / n:.0f} bytes each, "
-                  f"{n / targets / MSGS_PER_TARGET_S:.0f} s of sensor time)", flush=True)
-            for rep in range(repeats):
-                base = zenoh_baseline(pub, n) | {"targets": targets}
-                out["baseline"].append(base)
-                print(f"  zenoh baseline: {base['rate']:,.0f}/s", flush=True)
-                for rec in (True, False):
-                    r = throughput_run(pub, tmp / f"tp-{targets}-{rec}-{rep}", n=n, targets=targets, recording=rec,
-                                       window_s=window_s, warm_deadline_s=warm_dl, after_warm_s=after_warm_s)
-                    out["throughput"].append(r | {"baseline_rate": base["rate"]})
-                    print("  " + throughput_line(r), flush=True)
+            for scene in SCENES:  # the dense scene with the recording on only (the shipped configuration)
+                prep = pub.call("prepare", {"targets": targets, "messages": n, "seed": targets,
+                                            "dense": scene == "dense"}, timeout_s=300.0)
+                print(f"T={targets}, {scene} scene: {n} measurements prepared ({prep['bytes'] / n:.0f} bytes each, "
+                      f"{prep['sensor_s']:.0f} s of sensor time)", flush=True)
+                for rep in range(repeats):
+                    base = zenoh_baseline(pub, n) | {"targets": targets, "scene": scene}
+                    out["baseline"].append(base)
+                    print(f"  zenoh baseline: {base['rate']:,.0f}/s", flush=True)
+                    for rec in (True, False) if scene == "grid" else (True,):
+                        r = throughput_run(pub, tmp / f"tp-{scene}-{targets}-{rec}-{rep}", n=n, targets=targets,
+                                           recording=rec, window_s=window_s, warm_deadline_s=warm_dl,
+                                           after_warm_s=after_warm_s) | {"scene": scene}
+                        out["throughput"].append(r | {"baseline_rate": base["rate"]})
+                        print("  " + throughput_line(r), flush=True)
         for rate in (1_000, 10_000):
             for rep in range(repeats):
                 for rec in (True, False):
