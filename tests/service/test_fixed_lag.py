@@ -19,9 +19,16 @@ from fusion.io.streamfile import StreamReader
 from fusion.pipeline import Pipeline
 from fusion.smoothing import Histories, track_predictions
 from fusion.tracking.tracker import Tracker
-from publishers.publish import publish
 from publishers.stream import build_stream
-from tests.service.harness import Collector, client, latest, running_service, scenario_config
+from tests.service.harness import (
+    Collector,
+    client,
+    held_back,
+    latest,
+    publish_holding_back,
+    running_service,
+    scenario_config,
+)
 
 LAG = 3
 
@@ -35,7 +42,8 @@ def test_fixed_lag_smoothed_estimates_on_the_wire(tmp_path: Path) -> None:
         s = client(endpoint)
         try:
             col = Collector(s, f"fusion/{cfg.namespace}/smoothed/*", m.decode_estimate)
-            publish(s, samples, speed=20.0, match_timeout_s=5.0)  # jittered arrivals: late data
+            # jittered arrivals, and measurements of 7.0-7.6 s held back until the rest is handled: late data
+            publish_holding_back(s, svc, samples, held_back(7_000_000_000, 7_600_000_000), speed=20.0)
             assert svc.wait_idle(timeout_s=60.0)
             got = col.wait_for(svc.smoothed_published)
         finally:

@@ -26,6 +26,7 @@ from publishers.publish import publish
 from publishers.stream import build_stream
 from tests.service.harness import (
     client,
+    held_back,
     latest,
     put_all,
     query,
@@ -113,19 +114,11 @@ def test_the_service_tracks_as_well_as_the_reference_filter(name: str, tmp_path:
     assert rmse < 1.1 * rmse_ref, (rmse, rmse_ref)
 
 
-def _held_back(s) -> bool:
-    """Every third measurement of sensor time 7.0-7.6 s of an 8 s run: published after the
-    rest was handled, 0.4-1 s late, inside the 2 s window (a replay on any machine)."""
-    if "/meas/" not in s.key:
-        return False
-    meas = m.decode_measurement(s.payload)
-    return 7_000_000_000 <= meas.t_ns < 7_600_000_000 and meas.seq % 3 == 0
-
-
 def test_replay_equals_live_and_is_deterministic(tmp_path: Path) -> None:
     # 20x real time: small batches, so jittered arrivals reach the tracker late and force replays;
     # some measurements held back until the rest is handled, so replays happen however busy the machine
-    _, _, _, got, svc = run_live("mix", tmp_path, duration_s=8.0, speed=20.0, held=_held_back)
+    _, _, _, got, svc = run_live("mix", tmp_path, duration_s=8.0, speed=20.0,
+                                 held=held_back(7_000_000_000, 7_600_000_000))
     assert svc.tracker.counts.late_applied > 0, "the mix should deliver late measurements"
     stream = tmp_path / "live.fstream"
     est_a, est_b = tmp_path / "a.jsonl", tmp_path / "b.jsonl"
