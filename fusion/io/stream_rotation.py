@@ -82,8 +82,9 @@ class RotatingStream:
         self._open()
 
     def follow(self) -> None:
-        """Move to the recording's new file if it moved, also while no record comes (a file the
-        recording opened in a quiet spell, or at its last flush, gets its stream file too)."""
+        """Move to the recording's new file if it moved, also while no record comes: the
+        recording moves at a batch's steps, after the stream took the batch, so without this the
+        file a run's last batch moved it to had no stream file."""
         if self._follow is not None and (now := self._follow()) != self._followed:
             self._followed, self._base, self._part = now, now.with_suffix(STREAM_SUFFIX), 0
             self._rotate()
