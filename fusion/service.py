@@ -114,21 +114,8 @@ class Service:
 
     @property
     def published(self) -> int:
-        """Estimates published."""
+        """Estimates published (the other kinds: `outbox`'s counts)."""
         return self.outbox.published
-
-    @property
-    def events_published(self) -> int:
-        return self.outbox.events
-
-    @property
-    def smoothed_published(self) -> int:
-        return self.outbox.smoothed
-
-    @property
-    def predicted_published(self) -> int:
-        """Periodic predicted snapshots published."""
-        return self.outbox.predicted
 
     @property
     def intake(self) -> IntakeQueue:

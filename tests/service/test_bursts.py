@@ -53,7 +53,7 @@ def run(cfg: ServiceConfig, tmp: Path, *, split_pause_s: float | None) -> tuple[
                 p.put(payload)
             assert svc.wait_idle(quiet_s=0.3, timeout_s=30.0)
             assert svc.tracker.counts.applied == 27
-            return svc.tracker.counts.rescans, svc.events_published
+            return svc.tracker.counts.rescans, svc.outbox.events
         finally:
             s.close()
 

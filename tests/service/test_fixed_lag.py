@@ -45,10 +45,10 @@ def test_fixed_lag_smoothed_estimates_on_the_wire(tmp_path: Path) -> None:
             # jittered arrivals, and measurements of 7.0-7.6 s held back until the rest is handled: late data
             publish_holding_back(s, svc, samples, held_back(7_000_000_000, 7_600_000_000), speed=20.0)
             assert svc.wait_idle(timeout_s=60.0)
-            got = col.wait_for(svc.smoothed_published)
+            got = col.wait_for(svc.outbox.smoothed)
         finally:
             s.close()
-    assert len(got) == svc.smoothed_published > 0
+    assert len(got) == svc.outbox.smoothed > 0
     assert svc.tracker.counts.late_applied > 0
     assert svc.tracker.counts.replays > 0, "late data should have rewound the tracker"
     view = {k: e for k, e in latest(got).items() if e.status == "confirmed"}

@@ -82,10 +82,10 @@ def test_deleted_and_coasting_events_are_published(tmp_path: Path) -> None:
             col = Collector(s, m.all_events_key(NS), m.decode_event)
             put_all(s, samples)
             assert svc.wait_idle(timeout_s=30.0)
-            got = col.wait_for(svc.events_published)
+            got = col.wait_for(svc.outbox.events)
         finally:
             s.close()
-    assert len(got) == svc.events_published > 0
+    assert len(got) == svc.outbox.events > 0
     kinds = {(e.track_id, e.kind, e.reason) for e in got if not e.withdrawn}
     (a,) = {e.track_id for e in got if e.kind == "deleted"}
     assert (a, "confirmed", None) in kinds and (a, "coasting", None) in kinds
@@ -146,10 +146,10 @@ def test_periodic_predicted_snapshots_on_the_stream_clock(tmp_path: Path) -> Non
             col = Collector(s, predicted_key(NS), m.decode_snapshot)
             put_all(s, samples, pause_s=0.01)  # 10x real time
             assert svc.wait_idle(timeout_s=30.0)
-            got = col.wait_for(svc.predicted_published)
+            got = col.wait_for(svc.outbox.predicted)
         finally:
             s.close()
-    assert len(got) == svc.predicted_published
+    assert len(got) == svc.outbox.predicted
     # ticks at the multiples of 0.5 s from the first measurement (0.1 s) to the stream clock's
     # end (robust: about the second newest sensor time), each once, in order
     end = svc.tracker.now_ns
