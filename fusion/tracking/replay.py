@@ -29,7 +29,9 @@ surviving rows of B' in their order, then the births in detection order), so the
 bit-identical to running the whole scan. Where a rule counts over the whole scan the whole scan is run instead (`None`):
 capacity (the old run refused a birth for max_tracks, or the births would not fit now) and
 numerical skips in the old run (the batched gate then ran the whole dimension group pair by
-pair, which agrees with the batched math to 1e-12, not bit for bit).
+pair, which agrees with the batched math to 1e-12, not bit for bit); and a scan that holds a seq
+twice (a restarted publisher's two epochs sending the same seqs at the same time), where the
+pairs, keyed by seq, no longer name one detection each.
 """
 
 from __future__ import annotations
@@ -44,7 +46,7 @@ from fusion.core.association import coarse_pairs
 from fusion.core.checks import Array
 from fusion.tracking.association_kernels import counted
 from fusion.tracking.detection import Detection, seqs_of
-from fusion.tracking.id_sets import member, member_sorted, rerun_sets
+from fusion.tracking.id_sets import member, member_sorted, repeats, rerun_sets
 from fusion.tracking.results import OUTCOME_CODE, EventKind, Outcome, ScanAssociations, ScanKey, TrackEvent
 from fusion.tracking.scan import Coarse, ScanContext, ScanOutcome, Tally, measured_points, run_scan
 from fusion.tracking.splice import after_in_place, assembled_after, spliced
@@ -191,7 +193,7 @@ def _tally_of(assoc: ScanAssociations, rows: np.ndarray, events: list) -> Counte
 
 def rerun(ts: TrackSet, key: ScanKey, dets: tuple[Detection, ...], ctx: ScanContext, old: Stored,
           old_events: list, hint: Hint | None = None, seqs: np.ndarray | None = None) -> Partial | None:
-    """Scan `key` run again on `ts` with `dets` (sorted by seq), reusing `old` where the late data
+    """Scan `key` run again on `ts` with `dets` (sorted by seq and epoch), reusing `old` where the late data
     cannot reach; None where the whole scan must run (module docstring). `old_events`: the events
     the stored run reported; `hint`: the previous scan's partial re-run, if any; `seqs`: the seqs
     of `dets`, if known (fusion.tracking.step_order.merged_seqs)."""
@@ -204,6 +206,8 @@ def rerun(ts: TrackSet, key: ScanKey, dets: tuple[Detection, ...], ctx: ScanCont
     else:
         seqs = seqs_of(dets) if seqs is None else seqs
         old_j = np.searchsorted(seqs, old_seqs)  # both sorted by seq
+    if repeats(seqs):
+        return None  # a seq twice (two epochs of a publisher): pairs keyed by seq would be ambiguous
     new = np.ones(len(dets), dtype=bool)
     new[old_j] = False
     changed = ts.changed_since(old.before, among=hint.ids if hint is not None and hint.source is old.before else None)

@@ -27,6 +27,7 @@ from fusion.core.imm import IMM, Filter, combine_each
 from fusion.tracking.association_kernels import built, confirmed_first
 from fusion.tracking.detection import Detection, seqs_of
 from fusion.tracking.gating import Gated, Gater, Measured
+from fusion.tracking.id_sets import repeats
 from fusion.tracking.lifecycle import Lifecycle
 from fusion.tracking.models import SensorModel
 from fusion.tracking.results import (
@@ -103,7 +104,7 @@ class Coarse:
 
 def run_scan(ts: TrackSet, key: ScanKey, dets: tuple[Detection, ...], ctx: ScanContext,
              coarse: Coarse | None = None, det_seqs: np.ndarray | None = None) -> ScanOutcome:
-    """The scan `key` (see the module docstring); `dets` sorted by seq, R resolved. `coarse`:
+    """The scan `key` (see the module docstring); `dets` sorted by seq and epoch, R resolved. `coarse`:
     the scan's coarse gate if the caller knows it (a partial re-run: fusion.tracking.replay);
     `det_seqs`: the seqs of `dets`, if known (fusion.tracking.step_order.merged_seqs)."""
     t_ns, sensor_id = key
@@ -196,7 +197,10 @@ def _births_and_associations(ts: TrackSet, key: ScanKey, dets: tuple[Detection, 
     outcome, track_id, nis, at, births, unassigned, refused = built(
         len(dets), gated.mj.astype(np.int64, copy=False), gids, gated.nis, taken, max(ctx.max_tracks - len(ts), 0),
         *_BUILT_CODES)
-    born = _born_rows(ts, [dets[j] for j in births.tolist()], mpos[births], sm, ctx)
+    twice = frozenset()  # seqs the scan holds twice (two epochs of a publisher): their births' ids take the epoch
+    if births.size and repeats(det_seqs):
+        twice = frozenset(det_seqs[1:][det_seqs[1:] == det_seqs[:-1]].tolist())
+    born = _born_rows(ts, [dets[j] for j in births.tolist()], mpos[births], sm, ctx, twice)
     track_id[births] = born.ids
     tally[Tally.UNASSIGNED] += unassigned
     tally[Tally.BIRTHS_REFUSED_CAPACITY] += refused
@@ -251,9 +255,11 @@ def _no_rows(layout: Layout) -> Rows:
     return rows
 
 
-def _born_rows(ts: TrackSet, born: list[Detection], pos: Array, sm: SensorModel, ctx: ScanContext) -> Rows:
+def _born_rows(ts: TrackSet, born: list[Detection], pos: Array, sm: SensorModel, ctx: ScanContext,
+               twice: frozenset[int] = frozenset()) -> Rows:
     """Single-point initiation: position and its covariance from the measurement, the rest from
-    the configured prior (zero mean); an IMM starts with equal mode probabilities."""
+    the configured prior (zero mean); an IMM starts with equal mode probabilities. A birth from a
+    seq the scan holds twice (`twice`: two epochs of a publisher) has its epoch in its id."""
     k = len(born)
     L = ts.layout
     if not k:
@@ -276,7 +282,8 @@ def _born_rows(ts: TrackSet, born: list[Detection], pos: Array, sm: SensorModel,
     sensor = np.full(k, sm.index, np.int32)
     seen = np.zeros((k, len(L.sensors)), dtype=bool)
     seen[:, sm.index] = True
-    ids = np.array([track_id_for(d.sensor_id, d.seq, d.t_ns) for d in born], dtype=np.int64)
+    ids = np.array([track_id_for(d.sensor_id, d.seq, d.t_ns, d.epoch if d.seq in twice else None) for d in born],
+                   dtype=np.int64)
     status = np.full(k, ctx.lifecycle.born_status(), np.int8)
     one = np.ones(k, dtype=np.int64)
     return Rows(ids, status, one, t, t, one.copy(), np.zeros(k, np.int64), seen, sensor, seq, sensor.copy(),

@@ -1,5 +1,5 @@
 """The order of what a step of the tracker takes and reports (fusion.tracking.tracker): a scan's
-detections by seq, with the ones that arrived merged in; the world points of the measurements
+detections by seq and epoch, with the ones that arrived merged in; the world points of the measurements
 that arrived; a step's events, withdrawals first."""
 
 from __future__ import annotations
@@ -8,32 +8,35 @@ from bisect import insort
 
 import numpy as np
 
-from fusion.tracking.detection import SEQ, Detection, seqs_of
+from fusion.tracking.detection import SCAN_ORDER, Detection, in_scan_order, seqs_of
 from fusion.tracking.history import Entry
-from fusion.tracking.id_sets import member
+from fusion.tracking.id_sets import member, repeats
 from fusion.tracking.results import ScanKey, ScanPoints, TrackEvent
 
 
 def merged(prev: Entry | None, arrived: list[Detection] | None) -> tuple[Detection, ...]:
-    """A scan's detections by seq: its stored ones (sorted) with those that arrived now, as
-    sorted(stored + arrived, key=seq) orders them (stable: an equal seq after the stored ones),
-    each arrived one put in place by binary search instead of sorting the whole scan again
-    (a late measurement joins a scan of hundreds)."""
+    """A scan's detections by (seq, epoch): its stored ones (sorted) with those that arrived now,
+    as sorted(stored + arrived, key=(seq, epoch)) orders them, each arrived one put in place by
+    binary search instead of sorting the whole scan again (a late measurement joins a scan of
+    hundreds). No two detections of a scan share both (admission refuses duplicates), so the
+    order is the set's, whatever arrived when; by seq alone, a restarted publisher's two epochs
+    sending one seq at one time came in their arrival order."""
     if prev is None:
-        return tuple(sorted(arrived or (), key=SEQ))
+        return tuple(in_scan_order(arrived or ()))
     if not arrived:  # nothing new: the stored scan as it is
         return prev.dets
     out = list(prev.dets)
-    for d in sorted(arrived, key=SEQ):
-        insort(out, d, key=SEQ)
+    for d in in_scan_order(arrived):
+        insort(out, d, key=SCAN_ORDER)
     return tuple(out)
 
 
 def merged_seqs(prev: Entry | None, arrived: list[Detection] | None, dets: tuple[Detection, ...]) -> np.ndarray:
     """The seqs of `dets` (= merged(prev, arrived)), in their order: the stored scan's seqs where
-    its gates hold them (Gates.det_seqs) with the arrived ones put in place as `merged` puts them
-    (after an equal seq), instead of every detection of the scan read again (a late measurement
-    joins a scan of hundreds, and a partial re-run needs the seqs of the whole scan)."""
+    its gates hold them (Gates.det_seqs) with the arrived ones put in place (an equal seq's value
+    is the same wherever `merged` puts it among its equals), instead of every detection of the
+    scan read again (a late measurement joins a scan of hundreds, and a partial re-run needs the
+    seqs of the whole scan)."""
     base = None if prev is None or prev.gates is None else prev.gates.det_seqs
     if base is None:
         return seqs_of(dets)
@@ -64,6 +67,10 @@ def new_points(key: ScanKey, dets: tuple[Detection, ...], arrived: list[Detectio
     if seqs is None:
         seqs = seqs_of(dets)
     if again:
-        new = member(seqs, seqs_of(arrived))
+        if repeats(seqs):  # a seq twice (two epochs): the arrived ones by identity, not by seq
+            came = {id(d) for d in arrived}
+            new = np.fromiter((id(d) in came for d in dets), dtype=bool, count=len(dets))
+        else:
+            new = member(seqs, seqs_of(arrived))
         seqs, positions = seqs[new], positions[new]
     return ScanPoints(key[1], key[0], seqs, positions)

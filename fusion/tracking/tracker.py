@@ -13,7 +13,7 @@
                       (a step's withdrawals before its new events: withdrawals_first)
         commit the scans that fell behind the window                        (history, intake)
 
-Processing order is total: scans by (t_ns, sensor_id), detections of a scan by seq. So the
+Processing order is total: scans by (t_ns, sensor_id), detections of a scan by seq and epoch. So the
 tracks, and what a consumer holds after applying revisions and withdrawals, depend only on the
 set of accepted measurements, never on their arrival order or batching.
 """

@@ -50,12 +50,16 @@ def _axes(pos_idx: tuple[int, ...], vel_idx: tuple[int, ...]) -> tuple[np.ndarra
     return np.array(pos_idx, np.intp), np.array(vel_idx, np.intp)
 
 
-def track_id_for(sensor_id: str, seq: int, t_ns: int) -> int:
+def track_id_for(sensor_id: str, seq: int, t_ns: int, epoch: int | None = None) -> int:
     """A track's id, derived from the measurement that started it: the first 63 bits of
-    blake2b(sensor_id, seq, t_ns). The same under any arrival order; a sensor that reuses a seq
+    blake2b(sensor_id, seq, t_ns), and of its publisher's `epoch` too where given: where its scan
+    holds its seq twice (two epochs of a publisher sending the same seqs at the same time,
+    fusion.tracking.scan). The same under any arrival order, and the same for a run's data
+    whatever epoch its publisher drew (the epoch is a boot time); a sensor that reuses a seq
     (counter restart or wrap) at another time starts a track with another id; unique in
     practice otherwise (a collision among a million tracks has probability ~1e-7)."""
-    h = hashlib.blake2b(f"{sensor_id}\x00{seq}\x00{t_ns}".encode(), digest_size=8).digest()
+    key = f"{sensor_id}\x00{seq}\x00{t_ns}" if epoch is None else f"{sensor_id}\x00{seq}\x00{t_ns}\x00{epoch}"
+    h = hashlib.blake2b(key.encode(), digest_size=8).digest()
     return int.from_bytes(h, "big") >> 1
 
 

@@ -17,7 +17,7 @@ from fusion.core.imm_stack import StepCache, predict_imm
 from fusion.core.modes import Mode, build_imm
 from fusion.tracking.association_kernels import confirmed_first
 from fusion.tracking.gating import Measured
-from fusion.tracking.id_sets import member, rerun_sets
+from fusion.tracking.id_sets import member, repeats, rerun_sets
 from fusion.tracking.lifecycle_kernel import COASTED, COVARIANCE, MISSES, NOT_CONFIRMED, verdicts
 from fusion.tracking.trackset import Layout, Rows, Status, TrackSet
 
@@ -136,6 +136,19 @@ def test_member_is_isin(seed: int) -> None:
     assert member(values, of[:0]).shape == values.shape and not member(values, of[:0]).any()
     assert member(values[:0], of).shape == (0,)
 
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_repeats_is_a_sorted_array_with_fewer_unique_values(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    for n in (0, 1, 2, 3, 50):
+        a = np.sort(rng.integers(0, max(n, 1) * 2, n))
+        assert repeats(a) == (np.unique(a).size < a.size), a
+        u = np.unique(a)
+        assert not repeats(u)
+        if u.size:
+            k = int(rng.integers(u.size))
+            assert repeats(np.insert(u, k, u[k]))  # one value twice, anywhere
 
 def _grown_reference(e_ids, e_seqs, seed_ids, seed_seqs):
     """The growth loop fusion.tracking.replay ran before (np.isin, np.union1d)."""

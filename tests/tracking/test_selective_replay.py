@@ -276,33 +276,21 @@ def test_a_restarted_sensor_then_late_data(monkeypatch: pytest.MonkeyPatch) -> N
     assert st["partial"] + st["whole"] >= 6, st  # the late ones re-ran the scans after them
 
 
-@pytest.mark.xfail(strict=True, reason="known, not fixed (2026-12-07): a scan's pairs and gates are keyed by "
-                   "(track id, seq), and a restarted publisher repeats both (equal seqs in a scan; track ids from the "
-                   "sensor, seq and time, without the epoch): the selective replay differs from the whole one once "
-                   "re-runs are partial. A fix puts the epoch in those keys; then this passes and the mark must go")
-def test_a_restarted_sensor_with_partial_reruns(monkeypatch: pytest.MonkeyPatch) -> None:
+def test_a_scan_holding_a_seq_twice_runs_again_whole(monkeypatch: pytest.MonkeyPatch) -> None:
     """Twelve targets 1-6 km apart seen by one sensor (epoch 1000, seq = target); at every scan a
     restarted publisher (epoch 2000) sends seqs 0-5 again at the same times, at other targets'
-    places; scan 4's seq 0 arrives after the last scan, and the scans after it re-run in part."""
+    places; scan 4's seq 0 arrives after the last scan, and the scans from it run again: whole,
+    since each holds a seq twice (a partial re-run, its pairs keyed by seq, differed from the
+    whole one there)."""
+    from itertools import groupby
+
     from tests.service.test_nothing_lost import WIDE
     from tests.tracking.helpers import make_tracker
-    from tests.tracking.test_refusals import CART, S
+    from tests.tracking.test_order_invariance import two_epochs
+    from tests.tracking.test_refusals import CART
 
-    rng = np.random.default_rng(7)
-    pos, vel = rng.uniform(-3000, 3000, (12, 2)), rng.uniform(-10, 10, (12, 2))
-    calls: list[list] = []
-    held = []
-    for k in range(14):
-        t = S + k * S // 5
-        scan = []
-        for i in range(12):
-            scan.append(Detection.of("cart", t, i, pos[i] + vel[i] * (t - S) / 1e9 + rng.normal(0, 1, 2), epoch=1000))
-            if i < 6:
-                j = 11 - i
-                scan.append(Detection.of("cart", t, i, pos[j] + vel[j] * (t - S) / 1e9 + rng.normal(0, 1, 2),
-                                         epoch=2000))
-        if k == 4:
-            held.append(scan.pop(0))
-        calls.append(scan)
+    calls = [list(scan) for _, scan in groupby(two_epochs(), key=lambda d: d.t_ns)]
+    held = [calls[4].pop(0)]
     calls.append(held)
-    compare(make_tracker([CART], time=WIDE).config, calls, monkeypatch)
+    st = compare(make_tracker([CART], time=WIDE).config, calls, monkeypatch)
+    assert st["whole"] >= 10 and st["partial"] == 0, st
