@@ -323,7 +323,7 @@ class RecordingConfig(Section):
     the service runs (disk full, folder gone) stops; tracking and publishing go on, and the
     status says why (fusion.io.recording_guard, fusion.io.stream_rotation).
     `flush_interval_s`: the record is scored every 0.2 s, in small pieces: a flush of 0.5 s of rows
-    at 10k measurements/s took ~20-50 ms (BENCHMARKS.md); but only once `flush_min_rows` rows wait
+    at 10k measurements/s took ~20-50 ms (bench/HISTORY.md); but only once `flush_min_rows` rows wait
     (the record makes ~2.75 rows a measurement: 4000 rows are 0.2 s at ~7 300 measurements/s),
     else at the next write: a flush costs ~0.8 ms however few rows it holds, which slower streams
     paid again and again (10 targets in real time: ~30 measurements in 0.2 s). `write_interval_s`: the scored rows go to

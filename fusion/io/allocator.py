@@ -9,14 +9,14 @@ by default keeps freed pages committed for `purge_delay` (1 000 ms) and purges t
 later allocations; Python's heap and glibc's arenas stayed flat over the same soak
 (/proc/PID/smaps: 134 and 151 MB), the saw-tooth of resident memory was rerun's allocator alone.
 Over 20-25 minutes both grow a little (measured from inside the soak's service, 2026-12-06;
-BENCHMARKS.md, Soak): glibc's main arena by the holes freed numpy arrays leave, and this
+bench/HISTORY.md, End to end: the soak): glibc's main arena by the holes freed numpy arrays leave, and this
 allocator's resident part between rotations.
 
 Measured with the soak (`python -m bench --only soak`: 10 minutes at 10k measurements/s, 667
-targets, recording on; BENCHMARKS.md): resident memory after the first minute varied by 8.4-11.8 %
+targets, recording on; bench/HISTORY.md): resident memory after the first minute varied by 8.4-11.8 %
 (max/min - 1) in four runs before, and by 3.8 % and 4.1 % in two runs with this setting and the
 record written every second (recording.write_interval_s: fewer chunks, so a smaller footer index
-held per open file); BENCHMARKS.md has what each of the two does alone.
+held per open file); bench/HISTORY.md has what each of the two does alone.
 
 mimalloc reads its options from the environment once, when it starts (the moment rerun's
 bindings are loaded), so this must run before the first `import rerun`; a value the user set

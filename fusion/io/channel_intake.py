@@ -8,7 +8,7 @@ it was taken, and passes them to `take` in one call: one hand-over of the GIL pe
 per sample. Measured (`python -m bench --only handover`: a loop doing ~14 us of Python per
 sample, a publisher process blasting 120 000 samples on loopback, 3 interleaved pairs): 55k
 samples/s fed by a callback, 69k/s by this (1.08-1.31x per pair); the service's blast at 1000
-targets went from 29.0k to 34.5k measurements/s (BENCHMARKS.md). A first probe of a loop that
+targets went from 29.0k to 34.5k measurements/s (bench/HISTORY.md). A first probe of a loop that
 took the samples itself was ~7 % faster still, but a busy loop would then leave its samples in
 Zenoh, outside the intake queue's bounds and counts: not done.
 

@@ -210,7 +210,7 @@ class RerunSink:
         estimates at the same t_ns (fusion.io.truth_table), and as one block of rows for the
         record/truth and world/truth rows written at the next flush. One call for a batch's truth:
         a call per sample through the sink's wrappers was ~10 % of the recording's time at 10
-        targets fed fast (a line profile: BENCHMARKS.md, Recording)."""
+        targets fed fast (a line profile: bench/HISTORY.md, Recording)."""
         if not truths:
             return
         targets, t_ns, states = (list(c) for c in zip(*truths, strict=True))  # one pass

@@ -5,7 +5,7 @@ maybe_flush, close) is queued, in order, for one writer thread that makes it on 
 (fusion.io.recording_guard.GuardedSink over a RerunSink or a RotatingSink): the sink sees the
 same calls in the same order as when the loop made them itself, so the file holds the same rows;
 what changes is who waits. The record flush (scoring, step rows, Rerun's columns: ~24 ms every
-0.2 s at 10k measurements/s, BENCHMARKS.md) and the view flush no longer stop the loop.
+0.2 s at 10k measurements/s, bench/HISTORY.md) and the view flush no longer stop the loop.
 
 The two threads share the GIL, so a flush running while the loop handles a scan would slow the
 scan down as much as it did on the loop: the writer waits while the loop is busy (`loop_busy()`
@@ -19,7 +19,7 @@ them on its own thread, as a recording on the loop would, while the writer waits
 counts these). The two threads taking turns with the GIL cost the loop more than the calls
 themselves: in a blast at 100 targets the service applied 32-33k measurements/s with the writer
 making them and 36-37k with the loop making them (`[recording] background = false`;
-BENCHMARKS.md). A loop that keeps up (samples arrive while it works, but none wait when it ends
+bench/HISTORY.md). A loop that keeps up (samples arrive while it works, but none wait when it ends
 a batch) leaves them to the writer: a record flush made between two scans would delay the next.
 The writer goes on by itself if the loop has not taken them within another max_defer_s (a loop
 that does not call behind()). A flush is one call but

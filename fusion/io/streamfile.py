@@ -10,7 +10,7 @@ reports it (one line through logging, "fusion.stream", and `StreamReader.truncat
 header raises StreamFormatError. Version 1 files (a frame per record, its body one
 [arrival_ns, key, payload]) are read as before. Version 2 writes a batch as one msgpack array
 and one checksum: 0.17 us a record written against 0.63 for a frame each (5 000 records of 147
-bytes), which was 4 % of the service's loop in a blast at 100 targets (BENCHMARKS.md).
+bytes), which was 4 % of the service's loop in a blast at 100 targets (bench/HISTORY.md).
 
 `read_records(path)` also accepts `.jsonl`: one JSON message per line (fusion.messages, as
 written by `encode_json`); the arrival time of a line is its t_ns.
