@@ -29,7 +29,6 @@ import dataclasses
 import logging
 import threading
 import time
-from collections import Counter
 from pathlib import Path
 from typing import Any
 
@@ -39,9 +38,9 @@ from fusion.config import ServiceConfig, mode_names
 from fusion.io import wire, zenoh_acl
 from fusion.io.burst import Drained, drain_burst
 from fusion.io.channel_intake import ChannelIntake, Taken
-from fusion.io.checkpointer import Checkpointer, counts_since, service_checkpoint_path
+from fusion.io.checkpointer import Checkpointer, service_checkpoint_path
 from fusion.io.gain_groups import measured_components
-from fusion.io.intake_queue import IntakeLimits, IntakeQueue, key_kind
+from fusion.io.intake_queue import IntakeLimits, IntakeQueue
 from fusion.io.outputs import Outputs, open_outputs
 from fusion.io.recording import RotatingSink
 from fusion.io.recording_guard import GuardedSink
@@ -49,12 +48,12 @@ from fusion.io.rerun_sink import RerunSink
 from fusion.io.sink_thread import SinkThread
 from fusion.io.stream_rotation import RotatingStream
 from fusion.io.zenoh_advanced import RecoveringSubscription
-from fusion.io.zenoh_bus import connection_of, open_with_retry
+from fusion.io.zenoh_bus import Link, open_with_retry
+from fusion.ledger import Ledger
 from fusion.outbox import Outbox
 from fusion.pipeline import Pipeline, Record
 from fusion.snapshot_answers import SnapshotAnswers
-from fusion.tracking.detection import Detection, Reason
-from fusion.tracking.results import Counts
+from fusion.tracking.detection import Detection
 from fusion.tracking.tracker import Tracker
 from fusion.tracking.trackset import Status
 from fusion.tracking.warmup import warm_up
@@ -90,16 +89,13 @@ class Service:
         ic = config.intake
         known = [s.id for s in config.tracker.sensors] + ([config.tracker.control.source_id]
                                                          if config.tracker.control is not None else [])
-        self._base_counts = self.pipeline.counts()  # what a resumed tracker carried in: not this run's
         self._q = IntakeQueue(IntakeLimits(queue_max=ic.queue_max, queue_max_bytes=ic.queue_max_bytes,
                                            max_message_bytes=ic.max_message_bytes, rate_hz=ic.source_rate_hz,
                                            burst=ic.source_burst), known=known)
-        self._shutdown_dropped = 0
-        self._shutdown_kinds: Counter[str] = Counter()  # of them, by their keys' kind (intake_queue.key_kind)
+        self.ledger = Ledger(self.pipeline, self._q)  # this run's counts (fusion.ledger)
         self._wake = threading.Event()
         self._channels: ChannelIntake | None = None  # the subscribers' channels, once open()
         self._stop = threading.Event()
-        self._processed = 0
         self._settled = 0  # samples fully handled (published, status refreshed) when the queue last emptied
         self._started_ns = time.time_ns()
         self._status_payload = b""
@@ -108,9 +104,7 @@ class Service:
         self.session: Any = None
         self.outbox = Outbox(self.ns, self.tracker, self.snapshots, config.publication)  # fusion.outbox
         self._decls: list[Any] = []
-        self._connect_attempts = 0
-        self._linked = True  # a client: connected to its peer or router when last looked
-        self._reconnects = 0
+        self._link = Link(config.zenoh)  # how the session is joined (fusion.io.zenoh_bus)
 
     @property
     def published(self) -> int:
@@ -150,7 +144,7 @@ class Service:
         tr = self.tracker
         self._out = open_outputs(
             self.config.recording, namespace=self.ns, recording_dir=recording_dir, recording_path=recording_path,
-            stream_path=stream_path, counts=self._counts_for_recording,
+            stream_path=stream_path, counts=self.ledger.for_recording,
             sink_args={"layout": tr.layout, "position_indices": tr.position_indices,
                        "velocity_indices": tr.velocity_indices,
                        "meta": {"namespace": self.ns, "sensors": sorted(tr.sensors), "model": tr.model_name,
@@ -192,14 +186,14 @@ class Service:
     def _resume(self) -> None:
         """Restore a usable checkpoint into the tracker, in place (fusion.io.checkpointer)."""
         if self.checkpoints is not None and self.checkpoints.resume(self.tracker):
-            self._base_counts = self.pipeline.counts()
+            self.ledger.resumed()
 
     def open(self) -> None:
         """Open the Zenoh session, compile the tracker's kernels (fusion.tracking.warmup), then
         the output files, then declare the subscribers and queryables. The session comes first so
         that a busy port fails at once, not after the seconds a first compile can take."""
         zc = self.config.zenoh
-        self.session, self._connect_attempts = open_with_retry(zc, namespace=self.ns, stop=self._stop)
+        self.session, self._link.connect_attempts = open_with_retry(zc, namespace=self.ns, stop=self._stop)
         if self.session is None:  # stopped while connecting: nothing was opened
             return
         try:
@@ -270,7 +264,7 @@ class Service:
         if self.stream is not None:
             self.stream.write_many(batch)
         out = self.pipeline.ingest(batch, more=more, prune=False, decoded=decoded)  # pruned once out (below)
-        self._processed += len(batch)
+        self.ledger.took(len(batch))
         self.outbox.send(out)
         self.pipeline.prune()
 
@@ -295,15 +289,15 @@ class Service:
                     self._step(batch, more=cut and bool(self._q), decoded=decoded)  # a cut burst's last scan waits
                     if not self._q:  # caught up: make the status answer current at once
                         self._refresh_status(force=True)
-                        self._settled = self._processed + self._q.refused_total
+                        self._settled = self.ledger.handled
                 else:
                     if self._writer is not None:
                         self._writer.loop_idle()
                     self._wake.wait(0.05)
                     self._wake.clear()
-                    if not self._q and self._settled != self._processed + self._q.refused_total:
+                    if not self._q and self._settled != self.ledger.handled:
                         self._refresh_status(force=True)  # samples refused at the door since the last batch
-                        self._settled = self._processed + self._q.refused_total
+                        self._settled = self.ledger.handled
                 self.snapshots.answer_waiting()
                 if self._recording is not None:
                     self._recording.maybe_flush()
@@ -332,8 +326,7 @@ class Service:
             self._step([])
         left = self._drain(len(self._q)) if self._q else []
         if left:
-            self._shutdown_dropped += len(left)
-            self._shutdown_kinds.update(key_kind(key) for _, key, _ in left)
+            self.ledger.dropped(key for _, key, _ in left)
             log.warning("shutdown: drain deadline of %.1f s reached, %d queued samples dropped (counted as "
                         "'shutdown')", self.config.intake.drain_deadline_s, len(left))
             if self._recording is not None:  # a row to flush, so that the final counts reach the recording
@@ -353,75 +346,25 @@ class Service:
         log.info("fusion service stopped: %s", self.status_dict()["counts"])
 
     # ---- status --------------------------------------------------------------------------------
-    def _counts_for_recording(self) -> dict[str, int]:
-        c = self._run_counts().flat()
-        for reason, n in self._intake_refused().items():
-            c[f"refused/{reason}"] = n
-        return c
-
-    def _run_counts(self) -> Counts:
-        """This run's counts (a resumed tracker's carried-in counts taken off)."""
-        return counts_since(self.pipeline.counts(), self._base_counts)
-
-    def _intake_refused(self) -> dict[str, int]:
-        """Refusals before decoding, by reason: the intake queue's, and samples dropped at shutdown."""
-        out = dict(self._q.refused)
-        if self._shutdown_dropped:
-            out["shutdown"] = self._shutdown_dropped
-        return out
-
     def status_dict(self) -> dict[str, Any]:
-        """Counts add up: received = applied + inputs + truth + duplicates + sum(refused) + queued."""
-        c = self._run_counts()
-        refused = {r.value: n for r, n in c.refused.items() if r != Reason.DUPLICATE}
-        intake = self._intake_refused()
-        for reason, n in intake.items():
-            refused[reason] = refused.get(reason, 0) + n
-        refused = dict(sorted(refused.items()))
-        arrived = self._q.offered
-        queued = arrived - sum(intake.values()) - self._processed + self.pipeline.holding  # held: not yet applied
+        """The status (ServiceStatus): counts that add up (fusion.ledger), the tracks by status,
+        latency, the recording, the queue, the sensors' gaps, the link to Zenoh, the checkpoints."""
         counts = np.bincount(self.tracker.track_set.status, minlength=len(Status)).tolist()  # not a Track per row
         by_status = {s.label: counts[s] for s in Status if counts[s]}
-        kinds = self._q.refused_kinds + self._shutdown_kinds  # refused before decoding, by their keys' kind
         return {
             "uptime_s": (time.time_ns() - self._started_ns) / 1e9,
-            "counts": {
-                "received": arrived, "applied": c.applied, "duplicates": c.duplicates,
-                "refused": refused, "queued": queued, "replays": c.replays,
-                "late_applied": c.late_applied, "published": self.published,
-                "truth": c.truth, "inputs": c.inputs, "inputs_refused": c.inputs_refused + kinds["input"],
-                "truth_refused": c.truth_refused + kinds["truth"], "other_refused": c.other_refused + kinds["other"],
-            },
+            "counts": self.ledger.counts(published=self.published),
             "tracks": dict(sorted(by_status.items())),
             "latency": self.pipeline.latency.stats(),
             "recording": None if self.sink is None else str(self.sink.path),
             "recording_bytes": self._out.recording_bytes(),
             "queue_depth": len(self._q),
             "gaps": self._gaps(),
-            "zenoh": self._link(),
+            "zenoh": self._link.report(self.session),
             "recording_error": self._out.error(),
             "recording_queue": 0 if self._writer is None else self._writer.queued_rows,
             "checkpoint": None if self.checkpoints is None else self.checkpoints.status(),
         }
-
-    def _link(self) -> dict[str, Any]:
-        """How the session is joined: a peer is "listening"; a client "connected" or
-        "disconnected" (zenoh reconnects by itself; each return is counted)."""
-        routers, peers = connection_of(self.session) if self.session is not None else (0, 0)
-        mode = self.config.zenoh.mode
-        if mode == "client":
-            linked = routers + peers > 0
-            if linked and not self._linked:
-                self._reconnects += 1
-                log.warning("zenoh: connected again to %s", ", ".join(self.config.zenoh.connect))
-            elif self._linked and not linked and self.session is not None:
-                log.warning("zenoh: lost the connection to %s; reconnecting", ", ".join(self.config.zenoh.connect))
-            self._linked = linked
-            state = "connected" if linked else "disconnected"
-        else:
-            state = "listening"
-        return {"mode": mode, "state": state, "routers": routers, "peers": peers,
-                "connect_attempts": self._connect_attempts, "reconnects": self._reconnects}
 
     def _gaps(self) -> dict[str, dict[str, int]]:
         """Per sensor: seq values missing (and filled later), publisher runs (fusion.io.gaps),

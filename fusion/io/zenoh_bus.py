@@ -197,6 +197,35 @@ def connection_of(session: Any) -> tuple[int, int]:
     return len(list(session.info.routers_zid())), len(list(session.info.peers_zid()))
 
 
+class Link:
+    """How a service's session is joined, as its status reports it: a peer is "listening"; a
+    client "connected" or "disconnected" (zenoh reconnects by itself; each return is counted, and
+    each change logged, when `report` sees it)."""
+
+    def __init__(self, zc: ZenohConfig) -> None:
+        self._zc = zc
+        self.connect_attempts = 0  # of the session's opening (open_with_retry)
+        self._linked = True  # a client: connected to its peer or router when last looked
+        self._reconnects = 0
+
+    def report(self, session: Any) -> dict[str, Any]:
+        routers, peers = connection_of(session) if session is not None else (0, 0)
+        mode = self._zc.mode
+        if mode == "client":
+            linked = routers + peers > 0
+            if linked and not self._linked:
+                self._reconnects += 1
+                log.warning("zenoh: connected again to %s", ", ".join(self._zc.connect))
+            elif self._linked and not linked and session is not None:
+                log.warning("zenoh: lost the connection to %s; reconnecting", ", ".join(self._zc.connect))
+            self._linked = linked
+            state = "connected" if linked else "disconnected"
+        else:
+            state = "listening"
+        return {"mode": mode, "state": state, "routers": routers, "peers": peers,
+                "connect_attempts": self.connect_attempts, "reconnects": self._reconnects}
+
+
 def free_tcp_port() -> int:
     """A TCP port free on 127.0.0.1 right now (bind to port 0, read it, close)."""
     with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
