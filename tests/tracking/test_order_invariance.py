@@ -251,13 +251,15 @@ def run_dets(dets: list, batch_sizes: list[int]):
     tracker = make_tracker([CART], time=WIDE)
     consumer = Consumer()
     sizes = itertools.cycle(batch_sizes)
-    i = 0
+    i = points = 0
     while i < len(dets):
         n = next(sizes)
         result = tracker.process(dets[i:i + n])
         assert not result.refused, result.refused
         consumer.take(result)  # asserts each (track, time, sensor) gets increasing revisions
+        points += sum(len(p.seq) for p in result.measurements)
         i += n
+    assert points == len(dets)  # each measurement's world point reported once, when it arrived
     return tracker, consumer
 
 
