@@ -61,13 +61,18 @@ class TimeIndex:
         return self.array
 
 
+_TIME_TYPES = {None: pa.int64(), True: pa.timestamp("ns"), False: pa.duration("ns")}
+
+
 def time_index(name: str, t_ns: Sequence[int] | Array, *, epoch: bool | None) -> TimeIndex:
     """A timeline of integer ns: timestamps (epoch), durations from the stream's start (False),
-    or a sequence (None: the step counter). The same arrow values as rr.TimeColumn's."""
-    a = np.asarray(t_ns, dtype=np.int64)
-    if epoch is None:
-        return TimeIndex(name, pa.array(a))
-    return TimeIndex(name, pa.array(a.astype("datetime64[ns]" if epoch else "timedelta64[ns]")))
+    or a sequence (None: the step counter). The same arrow values as rr.TimeColumn's, on the
+    int64 array's own buffer: pa.array of the datetime64 copy cost 7.6 us for 20 rows and 22 us
+    for 2 000, this 2.5 us whatever the rows (2026-12-08), and a record flush sends three a
+    entity. The buffer is a copy of its own: Rerun may hold it after the call, and the caller's
+    array is the caller's."""
+    a = np.array(t_ns, dtype=np.int64)  # a new C-contiguous array
+    return TimeIndex(name, pa.Array.from_buffers(_TIME_TYPES[epoch], len(a), [None, pa.py_buffer(a)]))
 
 
 @functools.cache

@@ -99,12 +99,13 @@ class ReviewBlocks:
     """The distinct Review blocks of some estimates (fusion.tracking.results.Review: a scan's
     estimates share theirs) and each estimate's block and row in it."""
 
-    __slots__ = ("_fields", "_flat", "blocks", "row", "which")
+    __slots__ = ("_fields", "_flat", "blocks", "lens", "row", "which")
 
-    def __init__(self, blocks: list[Review | None], which: Array, row: Array,
+    def __init__(self, blocks: list[Review | None], which: Array, row: Array, lens: Array,
                  flat: dict[tuple[str, int | None], tuple[Array, Array]] | None = None,
                  fields: dict[str, tuple[list[Array | None], Array]] | None = None) -> None:
         self.blocks, self.which, self.row = blocks, which, row
+        self.lens = lens  # (blocks,) int64: each block's rows (of each of its fields; 0 where there is no block)
         self._flat = {} if flat is None else flat  # (field, cut): the blocks concatenated, each block's offset
         self._fields = {} if fields is None else fields  # field: each block's array of it, and whether it has one
 
@@ -114,12 +115,14 @@ class ReviewBlocks:
         n = len(reviews)
         keys = np.fromiter(map(id, reviews), dtype=np.int64, count=n)  # the same block, the same id
         _, first, which = np.unique(keys, return_index=True, return_inverse=True)
-        return cls([reviews[i] for i in first.tolist()], which,
-                   np.fromiter([e.row for e in estimates], dtype=np.int64, count=n))
+        blocks = [reviews[i] for i in first.tolist()]
+        return cls(blocks, which, np.fromiter([e.row for e in estimates], dtype=np.int64, count=n),
+                   np.array([0 if b is None else len(b.X) for b in blocks], dtype=np.int64))
 
     def subset(self, rows: Array) -> ReviewBlocks:
         """The same for the estimates `rows` (indices)."""
-        return ReviewBlocks(self.blocks, self.which[rows], self.row[rows], self._flat, self._fields)  # the same blocks
+        return ReviewBlocks(self.blocks, self.which[rows], self.row[rows], self.lens, self._flat,
+                            self._fields)  # the same blocks
 
     def _arrays(self, name: str) -> tuple[list[Array | None], Array]:
         """Each block's field `name` (None where there is no block, or it has not that field), and
@@ -155,10 +158,12 @@ class ReviewBlocks:
         blocks and its subsets), then the rows picked."""
         got = self._flat.get((name, cut))
         if got is None:
-            arrays = self._arrays(name)[0]
-            rows = np.fromiter([0 if a is None else len(a) for a in arrays], dtype=np.int64, count=len(arrays))
+            arrays, has = self._arrays(name)
+            rows = self.lens * has  # a block's rows are its rows of every field it has
             off = np.cumsum(rows) - rows  # each block's first row in the concatenation
-            parts = [a if cut is None else a[:, :cut] for a in arrays if a is not None]
+            parts = list(compress(arrays, has.tolist()))
+            if cut is not None:  # blocks may differ in width (a sensor's measured positions): cut each
+                parts = [a[:, :cut] for a in parts]
             got = self._flat[(name, cut)] = (np.concatenate(parts), off)
         flat, off = got
         return flat[off[self.which[at]] + self.row[at]]
@@ -190,7 +195,6 @@ class Stacked:
         ids, NIS and sensors from `columns` (theirs, or read here)."""
         d = X.shape[1]
         E = estimates
-        mus = list(map(attrgetter("mode_probabilities"), E))
         rv = ReviewBlocks.of(E) if blocks is None else blocks
         cols = EstimateColumns.of(E) if columns is None else columns
         prior = X.copy()
@@ -205,8 +209,13 @@ class Stacked:
             meas_pos[at] = got
         else:
             meas_pos = np.full((len(E), n_pos), np.nan)
-        mode = _present(mus)
-        mu = _filled(mode, mus, np.shape(mus[int(np.argmax(mode))])) if mode.any() else None
+        mode = rv.has("MU")
+        if mode.all():  # the tracker's: every estimate's mode probabilities a row of its block's MU
+            mu = rv.take("MU", np.arange(len(E)))
+        else:
+            mus = list(map(attrgetter("mode_probabilities"), E))
+            mode = _present(mus)
+            mu = _filled(mode, mus, np.shape(mus[int(np.argmax(mode))])) if mode.any() else None
         innovated = rv.has("y") & rv.has("S") & cols.has_nis
         gains = rv.has("H") & rv.has("prior_P")
         updates = {}

@@ -75,11 +75,11 @@ class Taken:
         dimension, X and P are the block: the pairs' estimates are views of their rows)."""
         if len(self.review) == 1:  # one dimension: every pair's row of one block, in order
             at, px, pP, y, S, H = self.review[0]
-            return [Review(self.X, self.P, meas_pos, px, pP, y, S, H)] * at.size, list(range(at.size))
+            return [Review(self.X, self.P, meas_pos, px, pP, y, S, H, self.MU)] * at.size, list(range(at.size))
         blocks: list[Review] = [None] * len(meas_pos)  # type: ignore[list-item]
         rows = [0] * len(meas_pos)
         for at, px, pP, y, S, H in self.review:
-            rv = Review(self.X[at], self.P[at], meas_pos[at], px, pP, y, S, H)
+            rv = Review(self.X[at], self.P[at], meas_pos[at], px, pP, y, S, H, None if self.MU is None else self.MU[at])
             for r, a in enumerate(at.tolist()):
                 blocks[a], rows[a] = rv, r
         return blocks, rows

@@ -67,7 +67,8 @@ class Review(msgspec.Struct, frozen=True, gc=False):
     Estimate.row): a scan's estimates share their blocks, instead of holding a view of each
     array (six objects per estimate to make and to free), and a consumer of many estimates
     (the recording) reads them block by block. X, P: the estimates' x and P, the arrays they
-    are rows of where they are (Estimate.x is X[row])."""
+    are rows of where they are (Estimate.x is X[row]); MU: an IMM's mode probabilities, the
+    arrays its estimates' mode_probabilities are rows of (None with one model)."""
 
     X: Array  # (k, d)
     P: Array  # (k, d, d)
@@ -77,6 +78,7 @@ class Review(msgspec.Struct, frozen=True, gc=False):
     y: Array | None = None  # (k, m)
     S: Array | None = None  # (k, m, m)
     H: Array | None = None  # (k, m, d)
+    MU: Array | None = None  # (k, modes)
 
 
 # Estimate's properties: its rows of its Review block's fields of these names

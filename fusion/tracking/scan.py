@@ -149,7 +149,7 @@ def run_scan(ts: TrackSet, key: ScanKey, dets: tuple[Detection, ...], ctx: ScanC
     ]
 
     assoc, born, born_j = _births_and_associations(ts, key, dets, det_seqs, gated, pairs, ctx, sm, mpos, tally)
-    born_review = Review(born.X, born.P, mpos[born_j]) if born.ids.size else None
+    born_review = Review(born.X, born.P, mpos[born_j], MU=born.MU) if born.ids.size else None
     for b in range(born.ids.size):
         tid = int(born.ids[b])
         events.append(TrackEvent(EventKind.BORN, tid, t_ns))

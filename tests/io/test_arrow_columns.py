@@ -134,6 +134,12 @@ def test_time_index_equals_rerun_time_column(epoch: bool | None) -> None:
     assert got.timeline_name() == want.timeline_name()
     a, b = got.as_arrow_array(), want.as_arrow_array()
     assert a.type == b.type and a.equals(b)
+    assert time_index("t", t.tolist(), epoch=epoch).as_arrow_array().equals(b)  # a list
+    wide = np.stack([t, -t], axis=1)
+    assert time_index("t", wide[:, 0], epoch=epoch).as_arrow_array().equals(b)  # a strided view
+    before = a.cast(pa.int64()).to_pylist()
+    t[0] = 99  # the caller's array changed after the call: not the arrow array's values
+    assert a.cast(pa.int64()).to_pylist() == before  # (rr.TimeColumn's sequence would follow it: its buffer is t's)
 
 
 def test_a_file_written_with_them_reads_back(tmp_path: Path) -> None:

@@ -83,3 +83,25 @@ def test_rotation_by_size_looks_at_the_file_after_flushes_only(tmp_path: Path) -
     sink.log_step(tr.process([dets[20]]))  # after a flush: the size is looked at, past 1 byte
     assert len(sink.files) == 2
     sink.close()
+
+
+def test_column_times_of_lists_arrays_and_both() -> None:
+    """Column.times reads chunks given as lists (add's rows, sealed), as arrays and as other
+    sequences, alone or mixed, into int64 arrays with every row in order."""
+    rng = np.random.default_rng(SEED)
+    want = [rng.integers(0, 2**62, size=k).tolist() for k in (3, 1, 4, 2)]
+    flat = [x for part in want for x in part]
+    for kinds in (("list",) * 4, ("array",) * 4, ("list", "array", "tuple", "int32")):
+        c = Column("record")
+        for kind, part in zip(kinds, want, strict=True):
+            v: object = {"list": part, "array": np.array(part, dtype=np.int64), "tuple": tuple(part),
+                         "int32": np.array([x % 2**31 for x in part], dtype=np.int32)}[kind]
+            c.extend(v, v, v, a=list(part))
+        exp = [x % 2**31 if kind == "int32" else x for kind, part in zip(kinds, want, strict=True) for x in part]
+        for got in c.times():
+            assert got.dtype == np.int64 and got.tolist() == exp, kinds
+    c = Column("text")
+    for x in flat:
+        c.add(x, 1, x, text="a", level="INFO")
+    t, step, arr = c.times()
+    assert t.tolist() == flat and step.tolist() == [1] * len(flat) and arr.tolist() == flat

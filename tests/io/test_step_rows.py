@@ -184,3 +184,32 @@ def test_outcomes_written_as_their_values() -> None:
     got = pa.array(sink.cols["record/associations"].field("outcome"))
     assert got.type == pa.string()
     assert set(got.to_pylist()) <= {o.value for o in Outcome}
+
+
+def _shifted(steps: list[Any], by: int) -> list[Any]:
+    """The same steps with every seq moved by `by` (points and associations alike)."""
+    out = []
+    for ms, Bs, step, arr in steps:
+        ms2 = tuple(ScanPoints(sp.sensor_id, sp.t_ns, sp.seq + by, sp.position) for sp in ms)
+        Bs2 = tuple(ScanAssociations(b.sensor_id, b.t_ns, b.seq + by, b.outcome, b.track_id, b.nis, b.gated_at,
+                                     b.gated) for b in Bs)
+        out.append((ms2, Bs2, step, arr))
+    return out
+
+
+def test_measured_points_with_far_seqs_no_associations_and_another_sensors() -> None:
+    """Seqs far apart (a publisher's epoch-sized counters, negative ones), steps without any
+    association, and associations of a sensor with no points in the flush: the reference's rows."""
+    base = _steps(3)
+    lonely = _blocks([Association("lidar9", 5, 1, Outcome.UPDATED, 7, 0.5, ())])
+    cases = [_shifted(base, 2**62), _shifted(base, -(2**61)), [(ms, (), step, arr) for ms, _, step, arr in base],
+             [(ms, Bs + lonely, step, arr) for ms, Bs, step, arr in base]]
+    for steps in cases:
+        new, ref = _Sink(), _Sink()
+        step_rows.measured_points(steps, new)
+        _ref_measured_points(steps, ref)
+        assert sorted(new.cols) == sorted(ref.cols) and new.cols
+        for e in ref.cols:
+            assert _rows(new.cols[e]) == _rows(ref.cols[e]), e
+    used = np.concatenate([new.cols[e].ragged("rgba", 4, np.uint8)[0] for e in new.cols])
+    assert (used == step_rows._RGBA_USED).all(axis=1).any()  # the case tests associated points too

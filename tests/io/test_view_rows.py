@@ -78,3 +78,25 @@ def test_measured_positions_of_different_lengths_are_cut_to_the_position_space()
           for k, e in enumerate(es)]
     assert len({e.meas_pos.shape for e in es if e.meas_pos is not None}) == 2
     _same(_of(es), es)
+
+
+def _with_block_modes(es: list[Estimate]) -> list[Estimate]:
+    """The estimates with their mode probabilities in their Review blocks too (Review.MU), as the
+    tracker gives them, for those that have both."""
+    return [e if e.review is None or e.mode_probabilities is None else
+            msgspec.structs.replace(e, review=msgspec.structs.replace(e.review, MU=e.mode_probabilities[None]))
+            for e in es]
+
+
+def test_mode_probabilities_read_from_the_blocks_or_from_each_estimate() -> None:
+    """Where every estimate's block holds its mode probabilities they are read block by block;
+    where some do not (no block, one model), each estimate's own: the same rows either way."""
+    modes = [e for e in _estimates(30, 4) if e.mode_probabilities is not None and e.review is not None]
+    assert len(modes) > 3
+    every = _with_block_modes(modes)
+    assert all(e.review.MU is not None for e in every)  # the block path
+    _same(_of(every), every)
+    mixed = _with_block_modes(_estimates(30, 5))
+    assert any(e.review is None or e.review.MU is None for e in mixed)  # each estimate's own
+    _same(_of(mixed), mixed)
+

@@ -6,9 +6,11 @@ blocks."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 
-from fusion.config import LifecycleConfig, MotionConfig, RadarSensorConfig, TrackerConfig
+from fusion.config import LifecycleConfig, MotionConfig, RadarSensorConfig, TrackerConfig, load_service_config
 from fusion.tracking.detection import Detection
 from fusion.tracking.tracker import Tracker
 
@@ -65,3 +67,29 @@ def test_review_rows_are_the_update_of_each_estimate_with_mixed_dimensions() -> 
             assert np.isclose(e.nis, e.y @ np.linalg.solve(e.S, e.y), rtol=1e-9)
             checked += 1
     assert mixed_scans >= 10 and shared >= 10 and checked >= 100, (mixed_scans, shared, checked)
+
+
+def test_an_imms_blocks_hold_its_mode_probabilities() -> None:
+    """With the shipped IMM (configs/service.toml's motion: CV and CT), each estimate's mode
+    probabilities are its row of its block's MU (Review.MU), for updates of either measurement
+    dimension and for births: what the recording reads block by block (fusion.io.view_rows)."""
+    motion = load_service_config(Path(__file__).parents[2] / "configs" / "service.toml").tracker.motion
+    assert motion.model == "imm"
+    cfg = TrackerConfig(sensors=[RadarSensorConfig(id="r", position_m=list(RADAR), range_std_m=1.0,
+                                                   bearing_std_rad=1e-3, range_rate_std_mps=0.5)],
+                        motion=motion, lifecycle=LifecycleConfig(confirm_m=2, confirm_n=3))
+    tr = Tracker(cfg)
+    rng = np.random.default_rng(5)
+    start = np.stack([np.linspace(-600.0, 600.0, 7), np.full(7, 300.0)], axis=1)
+    v = np.stack([np.full(7, 8.0), np.linspace(-5.0, 5.0, 7)], axis=1)
+    births = updates = 0
+    for k in range(20):
+        for e in tr.process(_radar(k, start + 0.1 * k * v, v, rng, rate_every=3)).estimates:
+            if e.status == "retracted":
+                continue
+            assert e.mode_probabilities is not None and e.review.MU is not None
+            assert e.review.MU.shape == (len(e.review.X), 2)
+            assert e.review.MU[e.row].tobytes() == e.mode_probabilities.tobytes()
+            births += e.nis is None
+            updates += e.nis is not None
+    assert births >= 7 and updates >= 100, (births, updates)
