@@ -171,8 +171,8 @@ def _int64(parts: list[Any], n: int) -> Array:
     79 as arrays, against 215 and 104 through np.asarray per chunk; 2026-12-08, a slow hour)."""
     if all(type(p) is list for p in parts):
         return np.fromiter(chain.from_iterable(parts), dtype=np.int64, count=n)
-    if all(isinstance(p, np.ndarray) for p in parts):
-        return np.concatenate(parts).astype(np.int64, copy=False)
+    if all(isinstance(p, np.ndarray) for p in parts):  # each cast to int64 as it is copied in
+        return np.concatenate(parts, dtype=np.int64, casting="unsafe")
     return np.concatenate([np.asarray(p, dtype=np.int64) for p in parts])
 
 

@@ -105,3 +105,14 @@ def test_column_times_of_lists_arrays_and_both() -> None:
         c.add(x, 1, x, text="a", level="INFO")
     t, step, arr = c.times()
     assert t.tolist() == flat and step.tolist() == [1] * len(flat) and arr.tolist() == flat
+
+
+def test_column_times_of_wide_unsigned_arrays_stay_exact() -> None:
+    """Array chunks of other integer types are cast to int64 one by one: a uint64 chunk beside an
+    int64 one does not go through float64 (np.concatenate's common type), which would round."""
+    big = 2**62 + 1
+    c = Column("record")
+    c.extend(np.array([big], dtype=np.uint64), np.array([1], dtype=np.uint64), np.array([big], dtype=np.uint64), a=[0])
+    c.extend(np.array([5], dtype=np.int64), np.array([2], dtype=np.int64), np.array([5], dtype=np.int64), a=[0])
+    t, step, arr = c.times()
+    assert t.tolist() == [big, 5] and step.tolist() == [1, 2] and arr.tolist() == [big, 5]
